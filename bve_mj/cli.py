@@ -1,0 +1,266 @@
+"""The ``bve-mj`` command.
+
+Exit status: 0 on success; 2 on bad input, with one line naming the field and what is
+allowed; 1 on an internal failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+__all__ = ["main"]
+
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+
+
+class _UsageError(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports bad input in one line and exits 2."""
+
+    def error(self, message: str) -> NoReturn:
+        raise _UsageError(f"{self.prog}: {message}")
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="bve-mj", description="Active monocular 3D fruit localisation: BVE + EKF.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    paper = sub.add_parser(
+        "paper",
+        help="the paper's synthetic protocol, E1-E10, table like the paper's with its numbers beside ours",
+        description="Reproduce the paper's table in the synthetic world (Gaussian measurements).",
+    )
+    paper.add_argument(
+        "--experiments",
+        default="E1,E2,E3,E4,E5,E6,E7,E8,E9,E10",
+        help="comma-separated, e.g. E1,E6",
+    )
+    paper.add_argument("--runs", default="100", help="runs per experiment (default 100)")
+    paper.add_argument("--seed", default="0", help="base seed (default 0)")
+    paper.add_argument("--steps", default=None, help="planned views per run (default from settings: 30)")
+    paper.add_argument("--measurement", default=None, help="range (the paper's EKF) or camera")
+    paper.add_argument("--planner", default=None, help="bve, random or circle")
+    paper.add_argument("--planning-model", default=None, help="paper or consistent")
+    paper.add_argument("--optimiser", default=None, help="slsqp or trust-constr")
+    paper.add_argument("--config", default=None, help="TOML file of settings (sections as in bve_mj.config)")
+    paper.add_argument("--workers", default=None, help="processes (default: all cores)")
+    paper.add_argument("--json", default=None, help="write settings and metrics to this JSON file")
+    paper.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    return parser
+
+
+def _int_arg(name: str, text: str | None, minimum: int) -> int | None:
+    from bve_mj.errors import ConfigError
+
+    if text is None:
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise ConfigError(name, text, f"an integer >= {minimum}") from None
+    if value < minimum:
+        raise ConfigError(name, text, f"an integer >= {minimum}")
+    return value
+
+
+def _check_output_path(name: str, path: str | None) -> Path | None:
+    from bve_mj.errors import ConfigError
+
+    if path is None:
+        return None
+    p = Path(path)
+    if p.is_dir():
+        raise ConfigError(name, path, "a file path, not a directory")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise ConfigError(name, path, f"a path in an existing directory ({parent} does not exist)")
+    if not os.access(parent, os.W_OK):
+        raise ConfigError(name, path, f"a path in a writable directory ({parent} is not writable)")
+    return p
+
+
+def write_json_atomic(path: Path, document: Any) -> None:
+    """Write JSON to a temporary file beside ``path``, then rename: never a torn file."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            json.dump(document, f, indent=2, default=_jsonable)
+            f.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _jsonable(obj: Any) -> Any:
+    import numpy as np
+
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")
+
+
+def _progress(enabled: bool) -> Any:
+    start = time.perf_counter()
+
+    def report(done: int, total: int) -> None:
+        if not enabled:
+            return
+        width = 30
+        filled = int(width * done / total)
+        rate = done / max(time.perf_counter() - start, 1e-9)
+        eta = (total - done) / rate if rate > 0 else 0.0
+        sys.stderr.write(
+            f"\r  [{'#' * filled}{'.' * (width - filled)}] {done}/{total} runs, eta {eta:4.0f} s"
+        )
+        if done == total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+    return report
+
+
+def _fmt(x: float | None, spec: str) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
+
+
+def format_table(summaries: dict[str, Any], paper: dict[str, dict[str, float]]) -> list[str]:
+    """The paper's table (per-axis, its numbers beside ours), then Euclidean and honesty columns."""
+    head = (
+        f"{'exp':<4} | {'paper: MAPE%':>12} {'MAE':>6} {'RMSE':>6} {'MSE':>8} "
+        f"| {'ours: MAPE%':>11} {'MAE':>6} {'RMSE':>6} {'MSE':>8} "
+        f"| {'eucl mean':>9} {'median':>6} {'p95':>6} | {'in3σ%':>5} {'NEES':>5} "
+        f"| {'plan ms':>7} {'restor%':>7}"
+    )
+    lines = [head, "-" * len(head)]
+    for name, s in summaries.items():
+        p = paper.get(name, {})
+        left = (
+            f"{name:<4} | {_fmt(p.get('mape_pct'), '12.2f')} {_fmt(p.get('mae_mm'), '6.1f')} "
+            f"{_fmt(p.get('rmse_mm'), '6.1f')} {_fmt(p.get('mse_mm2'), '8.1f')} | "
+        )
+        if s.status != "ok":
+            lines.append(left + "needs the arm's kinematic constraint (robot layer): not run")
+            continue
+        m = s.metrics
+        lines.append(
+            left + f"{m['mape_pct']:11.2f} {m['mae_mm']:6.1f} {m['rmse_mm']:6.1f} {m['mse_mm2']:8.1f} "
+            f"| {m['euclid_mean_mm']:9.1f} {m['euclid_median_mm']:6.1f} {m['euclid_p95_mm']:6.1f} "
+            f"| {m['inside_3sigma_pct']:5.1f} {m['nees_mean']:5.2f} "
+            f"| {m['plan_ms_median']:7.2f} {m['restoring_steps_pct']:7.1f}"
+        )
+    lines.append(
+        "per axis: eqs. 34-37 over runs and axes [mm]; eucl: ‖truth - estimate‖ per run [mm]; "
+        "in3σ%: truth inside the final 3σ ellipsoid (97.1% if consistent); NEES: mean (3 if consistent); "
+        "restor%: planned steps with no feasible viewpoint within the step limit"
+    )
+    return lines
+
+
+def _cmd_paper(args: argparse.Namespace) -> int:
+    from bve_mj.config import Settings, describe, load_settings
+    from bve_mj.experiments import (
+        PAPER_RESULTS,
+        parse_experiments,
+        run_table,
+        table_json,
+        with_overrides,
+    )
+
+    experiments = parse_experiments(args.experiments)
+    runs = _int_arg("runs", args.runs, 1) or 100
+    seed = _int_arg("seed", args.seed, 0) or 0
+    steps = _int_arg("steps", args.steps, 1)
+    workers = _int_arg("workers", args.workers, 1)
+    json_path = _check_output_path("json", args.json)
+    settings = load_settings(args.config) if args.config else Settings()
+    planner = {
+        k: v
+        for k, v in (
+            ("kind", args.planner),
+            ("planning_model", args.planning_model),
+            ("optimiser", args.optimiser),
+        )
+        if v is not None
+    }
+    settings = with_overrides(
+        settings,
+        measurement={"kind": args.measurement} if args.measurement else {},
+        planner=planner,
+        protocol={"steps": steps} if steps else {},
+    )
+    p = settings.planner
+    print(
+        f"bve-mj paper: synthetic protocol; measurement={settings.measurement.kind}, planner={p.kind}, "
+        f"planning model={p.planning_model}, optimiser={p.optimiser}; {runs} runs, seed {seed}, "
+        f"{settings.protocol.steps} steps"
+    )
+    t0 = time.perf_counter()
+    summaries = run_table(
+        settings,
+        experiments,
+        runs,
+        seed,
+        workers=workers,
+        progress=_progress(not args.quiet and sys.stderr.isatty()),
+    )
+    wall = time.perf_counter() - t0
+    for line in format_table(summaries, PAPER_RESULTS):
+        print(line)
+    print(f"wall time {wall:.1f} s")
+    print("settings:")
+    for line in describe(settings):
+        print("  " + line)
+    if json_path is not None:
+        write_json_atomic(json_path, table_json(settings, summaries, seed=seed, runs=runs, wall_s=wall))
+        print(f"wrote {json_path}")
+    return EXIT_OK
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``bve-mj``; returns the exit status."""
+    from bve_mj.errors import BveError, ConfigError
+
+    parser = _build_parser()
+    try:
+        args = parser.parse_args(argv)
+        if args.command is None:
+            parser.print_help()
+            return EXIT_USAGE
+        if args.command == "paper":
+            return _cmd_paper(args)
+        raise _UsageError(f"bve-mj: unknown command {args.command!r}")  # pragma: no cover
+    except _UsageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except ConfigError as exc:
+        print(f"bve-mj: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except BveError as exc:
+        print(f"bve-mj: failed: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    except KeyboardInterrupt:
+        print("bve-mj: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # internal failure: one line, exit 1 (BVE_MJ_DEBUG=1 for the traceback)
+        if os.environ.get("BVE_MJ_DEBUG"):
+            raise
+        print(f"bve-mj: internal error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,516 @@
+"""Settings: frozen, keyword-only dataclasses, validated on construction, loadable from TOML.
+
+The parameters the paper leaves open (Σc, Q, initial P, r_k, HFOV, steps per run) are chosen
+here, once, each with its reason in the field's ``why`` metadata. :func:`describe` prints
+them beside every result, so a table never travels without the settings that made it.
+
+Units are in the names: ``_m`` metres, ``_rad`` radians, ``_px`` pixels, ``_m2`` square
+metres.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import sys
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, get_args
+
+import numpy as np
+
+from bve_mj.errors import ConfigError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+__all__ = [
+    "CameraConfig",
+    "ConstraintConfig",
+    "FilterConfig",
+    "FruitPrior",
+    "LossName",
+    "MeasurementConfig",
+    "MeasurementKind",
+    "OptimiserName",
+    "PlannerConfig",
+    "PlannerKind",
+    "PlanningModel",
+    "PriorSource",
+    "ProtocolConfig",
+    "Settings",
+    "describe",
+    "load_settings",
+    "settings_from_dict",
+    "settings_to_dict",
+]
+
+MeasurementKind = Literal["range", "camera"]
+LossName = Literal["dispersion", "max_eigenvalue"]
+OptimiserName = Literal["slsqp", "trust-constr"]
+PlanningModel = Literal["paper", "consistent"]
+PlannerKind = Literal["bve", "random", "circle"]
+PriorSource = Literal["auto", "filter", "views"]
+
+
+def _why(text: str, unit: str = "") -> dict[str, str]:
+    return {"why": text, "unit": unit}
+
+
+# --------------------------------------------------------------------------- validation
+def _number(section: str, name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise ConfigError(f"{section}.{name}", value, "a real number")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ConfigError(f"{section}.{name}", value, "a finite real number")
+    return v
+
+
+def _positive(section: str, name: str, value: Any) -> None:
+    if _number(section, name, value) <= 0.0:
+        raise ConfigError(f"{section}.{name}", value, "a number > 0")
+
+
+def _non_negative(section: str, name: str, value: Any) -> None:
+    if _number(section, name, value) < 0.0:
+        raise ConfigError(f"{section}.{name}", value, "a number >= 0")
+
+
+def _open_interval(section: str, name: str, value: Any, lo: float, hi: float, text: str) -> None:
+    v = _number(section, name, value)
+    if not lo < v < hi:
+        raise ConfigError(f"{section}.{name}", value, text)
+
+
+def _positive_int(section: str, name: str, value: Any) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ConfigError(f"{section}.{name}", value, "an integer >= 1")
+
+
+def _choice(section: str, name: str, value: Any, literal: Any) -> None:
+    allowed = get_args(literal)
+    if value not in allowed:
+        raise ConfigError(f"{section}.{name}", value, "one of " + ", ".join(map(str, allowed)))
+
+
+def _vector3(section: str, name: str, value: Any) -> tuple[float, float, float]:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{section}.{name}", value, "three real numbers") from None
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ConfigError(f"{section}.{name}", value, "three finite real numbers")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+# --------------------------------------------------------------------------- sections
+@dataclass(frozen=True, kw_only=True)
+class CameraConfig:
+    """The eye-in-hand camera's image geometry (pinhole, square pixels)."""
+
+    hfov_rad: float = field(
+        default=math.radians(69.0),
+        metadata=_why("OAK-1, the camera the authors used on this arm: 69 deg horizontal", "rad"),
+    )
+    width_px: int = field(default=640, metadata=_why("OAK-1 preview resolution", "px"))
+    height_px: int = field(default=480, metadata=_why("OAK-1 preview resolution", "px"))
+
+    def __post_init__(self) -> None:
+        _open_interval("camera", "hfov_rad", self.hfov_rad, 0.0, math.pi, "a number in (0, pi)")
+        _positive_int("camera", "width_px", self.width_px)
+        _positive_int("camera", "height_px", self.height_px)
+
+    @property
+    def focal_px(self) -> float:
+        """Focal length [px] from the horizontal field of view."""
+        return 0.5 * self.width_px / math.tan(0.5 * self.hfov_rad)
+
+    @property
+    def vfov_rad(self) -> float:
+        """Vertical field of view [rad]."""
+        return 2.0 * math.atan(0.5 * self.height_px / self.focal_px)
+
+
+@dataclass(frozen=True, kw_only=True)
+class FruitPrior:
+    """What the estimator assumes of a tomato (it never knows the true radius)."""
+
+    radius_m: float = field(
+        default=0.035,
+        metadata=_why("r_k: middle of greenhouse tomato radii 25-45 mm", "m"),
+    )
+    radius_spread_rel: float = field(
+        default=0.15,
+        metadata=_why(
+            "the true radius is known only to +-15% (uniform): sigma = 0.15/sqrt(3) = 8.7% of range"
+        ),
+    )
+
+    def __post_init__(self) -> None:
+        _positive("fruit", "radius_m", self.radius_m)
+        _non_negative("fruit", "radius_spread_rel", self.radius_spread_rel)
+        if self.radius_spread_rel >= 1.0:
+            raise ConfigError("fruit.radius_spread_rel", self.radius_spread_rel, "a number in [0, 1)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class MeasurementConfig:
+    """What the filter measures, and the camera-frame covariance Σc it measures it with.
+
+    Σc is derived from the camera, not invented (see :meth:`Settings.sigma_c_m2`): at the
+    reference range ρ the lateral σ is ρ·σ_px/f, and the range σ combines the unknown
+    true radius with the pixel error of the apparent radius. ``sigma_c_m2`` overrides the
+    derivation with an explicit 3x3 (or diagonal) covariance in the camera frame.
+    """
+
+    kind: MeasurementKind = field(default="range", metadata=_why("the paper's EKF measures range only"))
+    centre_sigma_px: float = field(
+        default=1.0,
+        metadata=_why("blob-centre error: sub-pixel fit plus segmentation bias and calibration", "px"),
+    )
+    radius_sigma_px: float = field(
+        default=0.5, metadata=_why("apparent-radius error of a circle fit to the blob edge", "px")
+    )
+    reference_range_m: float = field(
+        default=1.0, metadata=_why("the protocol's l_dist: Σc is taken at 1 m", "m")
+    )
+    sigma_c_m2: tuple[tuple[float, ...], ...] | None = field(
+        default=None, metadata=_why("explicit Σc (camera frame, x = depth); None derives it", "m^2")
+    )
+
+    def __post_init__(self) -> None:
+        _choice("measurement", "kind", self.kind, MeasurementKind)
+        _positive("measurement", "centre_sigma_px", self.centre_sigma_px)
+        _positive("measurement", "radius_sigma_px", self.radius_sigma_px)
+        _positive("measurement", "reference_range_m", self.reference_range_m)
+        if self.sigma_c_m2 is not None:
+            object.__setattr__(self, "sigma_c_m2", _covariance("measurement.sigma_c_m2", self.sigma_c_m2))
+
+
+def _covariance(name: str, value: Any) -> tuple[tuple[float, ...], ...]:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(name, value, "a 3x3 symmetric positive-definite matrix or 3 variances") from None
+    if arr.shape == (3,):
+        arr = np.diag(arr)
+    if arr.shape != (3, 3) or not np.all(np.isfinite(arr)) or not np.allclose(arr, arr.T):
+        raise ConfigError(name, value, "a 3x3 symmetric positive-definite matrix or 3 variances")
+    try:
+        np.linalg.cholesky(arr)
+    except np.linalg.LinAlgError:
+        raise ConfigError(name, value, "a positive-definite matrix (all eigenvalues > 0)") from None
+    return tuple(tuple(float(x) for x in row) for row in arr)
+
+
+@dataclass(frozen=True, kw_only=True)
+class FilterConfig:
+    """The EKF: static fruit (F = I), process noise Q, prior P0, optional NIS gating."""
+
+    process_sigma_m: float = field(
+        default=0.001,
+        metadata=_why("Q = (1 mm)^2 I per step: the fruit is static; a little Q absorbs model error", "m"),
+    )
+    initial_sigma_m: float = field(
+        default=0.15 / math.sqrt(3.0),
+        metadata=_why("P0: std of the protocol's U[-0.15, 0.15] m initial error per axis", "m"),
+    )
+    gate_probability: float | None = field(
+        default=None,
+        metadata=_why("NIS gate (chi-square probability); off in the paper's Gaussian protocol"),
+    )
+
+    def __post_init__(self) -> None:
+        _non_negative("filter", "process_sigma_m", self.process_sigma_m)
+        _positive("filter", "initial_sigma_m", self.initial_sigma_m)
+        if self.gate_probability is not None:
+            _open_interval(
+                "filter",
+                "gate_probability",
+                self.gate_probability,
+                0.0,
+                1.0,
+                "a number in (0, 1) or none",
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class ConstraintConfig:
+    """The paper's constraint parameters (eqs. 14-21)."""
+
+    workspace_centre_m: tuple[float, float, float] = field(
+        default=(0.0, 0.0, 0.159),
+        metadata=_why("m: Manipulator-H joint-2 axis on joint-1 axis (eq. 14)", "m"),
+    )
+    workspace_radius_m: float = field(
+        default=0.645, metadata=_why("r_m: the arm's reach from m, rounded down (eq. 14)", "m")
+    )
+    cone_fov_rad: float | None = field(
+        default=None,
+        metadata=_why("field-of-view cone angle (eq. 16); None uses the camera's HFOV as the paper", "rad"),
+    )
+    wall_distance_m: float = field(default=0.1, metadata=_why("d: plant wall offset (eq. 18)", "m"))
+    band_distance_m: float = field(default=1.0, metadata=_why("l_dist (eq. 20)", "m"))
+    band_tolerance_m: float = field(default=0.1, metadata=_why("epsilon (eq. 20)", "m"))
+    step_m: float = field(default=0.2, metadata=_why("r_d: step limit, always on (eq. 21)", "m"))
+
+    def __post_init__(self) -> None:
+        object.__setattr__(
+            self,
+            "workspace_centre_m",
+            _vector3("constraints", "workspace_centre_m", self.workspace_centre_m),
+        )
+        _positive("constraints", "workspace_radius_m", self.workspace_radius_m)
+        if self.cone_fov_rad is not None:
+            _open_interval(
+                "constraints",
+                "cone_fov_rad",
+                self.cone_fov_rad,
+                0.0,
+                math.pi,
+                "a number in (0, pi) or none",
+            )
+        _non_negative("constraints", "wall_distance_m", self.wall_distance_m)
+        _positive("constraints", "band_distance_m", self.band_distance_m)
+        _positive("constraints", "band_tolerance_m", self.band_tolerance_m)
+        if self.band_tolerance_m >= self.band_distance_m:
+            raise ConfigError(
+                "constraints.band_tolerance_m", self.band_tolerance_m, "a number < band_distance_m"
+            )
+        _positive("constraints", "step_m", self.step_m)
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlannerConfig:
+    """Which planner chooses the next viewpoint, and how the BVE optimises."""
+
+    kind: PlannerKind = field(default="bve", metadata=_why("bve, or a baseline: random, circle"))
+    optimiser: OptimiserName = field(
+        default="slsqp",
+        metadata=_why("SLSQP: same viewpoints as trust-constr (interior point) at ~1/30 of the time"),
+    )
+    planning_model: PlanningModel = field(
+        default="paper",
+        metadata=_why("paper: Σn = R Σc R^T whatever is measured; consistent: the filter's information"),
+    )
+    approach_aggressiveness: float = field(
+        default=0.0,
+        metadata=_why("a in eq. 13; 0 turns the approach term off (E1-E10 do not use it)"),
+    )
+    approach_set_point: float = field(default=10.0, metadata=_why("b in eq. 13: iteration of act = 1/2"))
+    prior_source: PriorSource = field(
+        default="auto",
+        metadata=_why(
+            "Sigma_o: filter = the EKF's P; views = P0 fused with Sigma_n of every view (eq. 9, "
+            "reproduces the paper's circling); auto = views for paper, filter for consistent"
+        ),
+    )
+    max_eigenvalue_trace_weight: float = field(
+        default=0.5,
+        metadata=_why(
+            "tau: trace tie-break added to eq. 11 where its top eigenvalue is flat (0 = as printed)"
+        ),
+    )
+    starts: int = field(
+        default=2,
+        metadata=_why("local optimisations per plan, from the best-scoring of 15 seed points"),
+    )
+    max_iterations: int = field(default=100, metadata=_why("optimiser iteration cap"))
+    feasibility_tol: float = field(
+        default=1e-7, metadata=_why("largest constraint value accepted as feasible", "m or m^2")
+    )
+
+    def __post_init__(self) -> None:
+        _choice("planner", "kind", self.kind, PlannerKind)
+        _choice("planner", "optimiser", self.optimiser, OptimiserName)
+        _choice("planner", "planning_model", self.planning_model, PlanningModel)
+        _choice("planner", "prior_source", self.prior_source, PriorSource)
+        _non_negative("planner", "approach_aggressiveness", self.approach_aggressiveness)
+        _number("planner", "approach_set_point", self.approach_set_point)
+        _non_negative("planner", "max_eigenvalue_trace_weight", self.max_eigenvalue_trace_weight)
+        _positive_int("planner", "starts", self.starts)
+        _positive_int("planner", "max_iterations", self.max_iterations)
+        _positive("planner", "feasibility_tol", self.feasibility_tol)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ProtocolConfig:
+    """The paper's Monte-Carlo protocol for the synthetic world."""
+
+    fruit_half_extent_m: float = field(default=1.0, metadata=_why("fruit k ~ U[-1, 1]^3 m", "m"))
+    camera_half_extent_m: float = field(default=2.0, metadata=_why("camera start ~ U[-2, 2]^3 m", "m"))
+    initial_error_m: float = field(
+        default=0.15, metadata=_why("initial estimate = k + U[-0.15, 0.15]^3 m", "m")
+    )
+    steps: int = field(
+        default=30,
+        metadata=_why(
+            "views per run after the first: ~15 to reach the feasible set at 0.2 m a step, ~15 to refine"
+        ),
+    )
+
+    def __post_init__(self) -> None:
+        _positive("protocol", "fruit_half_extent_m", self.fruit_half_extent_m)
+        _positive("protocol", "camera_half_extent_m", self.camera_half_extent_m)
+        _non_negative("protocol", "initial_error_m", self.initial_error_m)
+        _positive_int("protocol", "steps", self.steps)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Settings:
+    """Every setting of a synthetic (paper-protocol) run."""
+
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    fruit: FruitPrior = field(default_factory=FruitPrior)
+    measurement: MeasurementConfig = field(default_factory=MeasurementConfig)
+    filter: FilterConfig = field(default_factory=FilterConfig)
+    constraints: ConstraintConfig = field(default_factory=ConstraintConfig)
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            expected = _SECTIONS[f.name]
+            if not isinstance(value, expected):
+                raise ConfigError(f.name, value, f"a {expected.__name__}")
+
+    def sigma_c_m2(self) -> np.ndarray:
+        """Σc, the camera-frame measurement covariance [m²] (x = depth, y/z lateral), (3, 3).
+
+        Derived at the reference range ρ (1 m): lateral σ = ρ·σ_centre/f; range from the
+        angular radius of a sphere, ρ = r / sin α, so σ_ρ/ρ combines the relative spread
+        of the true radius (uniform ±s: s/√3) with the relative pixel error of the
+        apparent radius (σ_r/r_px, r_px = f·tan α).
+        """
+        m = self.measurement
+        if m.sigma_c_m2 is not None:
+            return np.array(m.sigma_c_m2, dtype=float)
+        rho = m.reference_range_m
+        f = self.camera.focal_px
+        sigma_lateral = rho * m.centre_sigma_px / f
+        alpha = math.asin(min(self.fruit.radius_m / rho, 1.0))
+        radius_px = f * math.tan(alpha)
+        rel = math.hypot(self.fruit.radius_spread_rel / math.sqrt(3.0), m.radius_sigma_px / radius_px)
+        sigma_range = rho * rel
+        return np.diag([sigma_range**2, sigma_lateral**2, sigma_lateral**2])
+
+    @property
+    def prior_source(self) -> Literal["filter", "views"]:
+        """The planner's Σo source with ``auto`` resolved."""
+        src = self.planner.prior_source
+        if src == "auto":
+            return "views" if self.planner.planning_model == "paper" else "filter"
+        return src
+
+    @property
+    def cone_fov_rad(self) -> float:
+        c = self.constraints.cone_fov_rad
+        return self.camera.hfov_rad if c is None else c
+
+
+_SECTIONS: dict[str, type] = {
+    "camera": CameraConfig,
+    "fruit": FruitPrior,
+    "measurement": MeasurementConfig,
+    "filter": FilterConfig,
+    "constraints": ConstraintConfig,
+    "planner": PlannerConfig,
+    "protocol": ProtocolConfig,
+}
+
+
+# --------------------------------------------------------------------------- loading
+def _suggest(name: str, options: list[str]) -> str:
+    close = difflib.get_close_matches(name, options, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _section_from_dict(section: str, cls: type, data: Any) -> Any:
+    if not isinstance(data, Mapping):
+        raise ConfigError(section, data, "a table of settings")
+    names = [f.name for f in dataclasses.fields(cls)]
+    for key in data:
+        if key not in names:
+            raise ConfigError(
+                f"{section}.{key}",
+                data[key],
+                "one of " + ", ".join(names) + _suggest(str(key), names),
+            )
+    return cls(**dict(data))
+
+
+def settings_from_dict(data: Mapping[str, Any], base: Settings | None = None) -> Settings:
+    """Build :class:`Settings` from nested mappings (as TOML gives), over ``base``'s values.
+
+    Unknown sections or keys raise :class:`ConfigError` with a "did you mean" suggestion.
+    """
+    base = base or Settings()
+    if not isinstance(data, Mapping):
+        raise ConfigError("settings", data, "a table of sections")
+    sections: dict[str, Any] = {}
+    for key, value in data.items():
+        if key not in _SECTIONS:
+            names = list(_SECTIONS)
+            raise ConfigError(str(key), value, "one of " + ", ".join(names) + _suggest(str(key), names))
+        merged = (
+            {**dataclasses.asdict(getattr(base, key)), **dict(value)} if isinstance(value, Mapping) else value
+        )
+        sections[key] = _section_from_dict(str(key), _SECTIONS[key], merged)
+    return dataclasses.replace(base, **sections)
+
+
+def load_settings(path: str | Path, base: Settings | None = None) -> Settings:
+    """Read :class:`Settings` from a TOML file; missing keys keep ``base``'s values."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError("config", str(p), f"a readable TOML file ({exc.strerror})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError("config", str(p), f"valid TOML ({exc})") from None
+    return settings_from_dict(data, base)
+
+
+def settings_to_dict(settings: Settings) -> dict[str, Any]:
+    """Plain nested dict of every setting plus the derived Σc (JSON-serialisable)."""
+    out: dict[str, Any] = dataclasses.asdict(settings)
+    out["derived"] = {
+        "sigma_c_m2": settings.sigma_c_m2().tolist(),
+        "focal_px": settings.camera.focal_px,
+        "cone_fov_rad": settings.cone_fov_rad,
+        "prior_source": settings.prior_source,
+    }
+    return out
+
+
+def _walk(obj: Any, prefix: str) -> Iterator[tuple[str, Any, dataclasses.Field[Any]]]:
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            yield from _walk(value, f"{prefix}{f.name}.")
+        else:
+            yield f"{prefix}{f.name}", value, f
+
+
+def describe(settings: Settings) -> list[str]:
+    """One line per setting: name = value [unit]  # why. Then the derived Σc."""
+    lines = []
+    for name, value, f in _walk(settings, ""):
+        unit = f.metadata.get("unit", "")
+        shown = f"{value:.6g}" if isinstance(value, float) else repr(value)
+        lines.append(f"{name} = {shown}{' [' + unit + ']' if unit else ''}  # {f.metadata.get('why', '')}")
+    sc = np.sqrt(np.diag(settings.sigma_c_m2()))
+    lines.append(
+        f"derived Sigma_c std (depth, lateral, lateral) = "
+        f"({sc[0] * 1e3:.1f}, {sc[1] * 1e3:.2f}, {sc[2] * 1e3:.2f}) mm at "
+        f"{settings.measurement.reference_range_m:g} m; focal = {settings.camera.focal_px:.1f} px"
+    )
+    return lines

@@ -1,0 +1,92 @@
+"""Extended Kalman filter for a static fruit (paper eqs. 22-33), as pure functions.
+
+Prediction: x stays, P ← P + Q (the paper's eq. 23 with its typo corrected).
+Update: Joseph form, symmetrised; gain through ``solve``, never an explicit inverse.
+Optional NIS gating rejects a measurement whose normalised innovation squared exceeds the
+chi-square quantile of the given probability.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from bve_mj.errors import EstimationError
+from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.models import MeasurementModel
+
+__all__ = ["UpdateResult", "nis_threshold", "predict", "update"]
+
+
+@dataclass(frozen=True)
+class UpdateResult:
+    """What an update did.
+
+    Attributes:
+        belief: the posterior (the prior itself when the measurement was gated out).
+        innovation: z - h(x⁻), (m,).
+        nis: normalised innovation squared yᵀ S⁻¹ y.
+        accepted: False when the gate rejected the measurement.
+    """
+
+    belief: Belief
+    innovation: np.ndarray
+    nis: float
+    accepted: bool
+
+
+def predict(belief: Belief, Q: np.ndarray) -> Belief:
+    """Static-fruit prediction: mean unchanged, covariance P + Q."""
+    Q = np.asarray(Q, dtype=float)
+    if Q.shape != (3, 3) or not np.all(np.isfinite(Q)):
+        raise EstimationError(f"process noise Q must be a finite 3x3 matrix, got shape {Q.shape}")
+    return Belief(belief.mean, belief.cov + Q)
+
+
+@lru_cache(maxsize=64)
+def nis_threshold(probability: float, dof: int) -> float:
+    """Chi-square quantile: the NIS gate for a measurement of ``dof`` components."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(probability, dof))
+
+
+def update(
+    belief: Belief,
+    z: np.ndarray,
+    model: MeasurementModel,
+    gate_probability: float | None = None,
+) -> UpdateResult:
+    """EKF correction with measurement ``z`` of ``model``.
+
+    Raises:
+        EstimationError: if z or the model's output is not finite or of the wrong shape.
+    """
+    z = np.atleast_1d(np.asarray(z, dtype=float))
+    x, P = belief.mean, belief.cov
+    h = np.atleast_1d(model.predict(x))
+    H = np.atleast_2d(model.jacobian(x))
+    R = np.atleast_2d(model.noise_cov)
+    m = h.shape[0]
+    if z.shape != (m,) or H.shape != (m, 3) or R.shape != (m, m):
+        raise EstimationError(
+            f"measurement shapes disagree: z {z.shape}, h {h.shape}, H {H.shape}, R {R.shape}"
+        )
+    if not (np.all(np.isfinite(z)) and np.all(np.isfinite(H)) and np.all(np.isfinite(R))):
+        raise EstimationError("measurement holds NaN or infinite values; refusing to fuse it")
+    y = z - h
+    S = H @ P @ H.T + R
+    S = 0.5 * (S + S.T)
+    try:
+        Sinv_y = np.linalg.solve(S, y)
+        K = np.linalg.solve(S, H @ P).T  # P Hᵀ S⁻¹ (S, P symmetric)
+    except np.linalg.LinAlgError as exc:
+        raise EstimationError(f"innovation covariance is singular: {exc}") from None
+    nis = float(y @ Sinv_y)
+    if gate_probability is not None and nis > nis_threshold(gate_probability, m):
+        return UpdateResult(belief, y, nis, False)
+    I_KH = np.eye(3) - K @ H
+    P_new = I_KH @ P @ I_KH.T + K @ R @ K.T
+    return UpdateResult(Belief(x + K @ y, 0.5 * (P_new + P_new.T)), y, nis, True)

@@ -1,0 +1,114 @@
+"""Camera geometry: the paper's camera frame R_C^W (eqs. 4-8), look-at poses, projection.
+
+Frames: the camera frame C has x along the viewing direction (the paper's convention,
+and the tool x axis of the arm's flange), y horizontal (parallel to the world xy plane),
+z = x × y. ``R_world_camera`` has the camera axes as columns, so
+``p_world = R_world_camera @ p_camera + p_world_camera``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "VERTICAL_EPS",
+    "camera_rotation",
+    "camera_rotation_derivative",
+    "look_at_pose",
+    "project_point",
+    "skew",
+]
+
+VERTICAL_EPS = 1e-9
+"""Below this horizontal norm of the viewing direction, y_C falls back to the world y axis."""
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrix [v]× such that [v]× w = v × w."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+_A = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])  # x -> (-x2, x1, 0)
+_I3 = np.eye(3)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    # np.cross costs ~10 µs of argument handling for two 3-vectors; this is the hot path
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _frame(
+    p_world_camera: np.ndarray, p_world_target: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float]:
+    u = np.asarray(p_world_target, dtype=float) - np.asarray(p_world_camera, dtype=float)
+    n = math.sqrt(float(u @ u))
+    if n == 0.0:
+        raise ValueError("camera and target coincide: the viewing direction is undefined")
+    x = u / n
+    m = math.hypot(x[0], x[1])
+    if m > VERTICAL_EPS:
+        y = np.array([-x[1] / m, x[0] / m, 0.0])
+    else:  # straight up or down: any horizontal axis will do; take world y
+        y = np.array([0.0, 1.0, 0.0])
+        m = 0.0
+    return x, y, _cross(x, y), u, n, m
+
+
+def camera_rotation(p_world_camera: np.ndarray, p_world_target: np.ndarray) -> np.ndarray:
+    """R_C^W of a camera at ``p_world_camera`` looking at ``p_world_target`` (paper eqs. 4-8).
+
+    Columns: x_C = unit viewing direction; y_C = normalize(-x2, x1, 0) (horizontal);
+    z_C = x_C × y_C. Looking straight up or down, y_C is the world y axis. (3, 3).
+
+    Raises:
+        ValueError: if the camera and the target coincide.
+    """
+    x, y, z, *_ = _frame(p_world_camera, p_world_target)
+    R = np.empty((3, 3))
+    R[:, 0], R[:, 1], R[:, 2] = x, y, z
+    return R
+
+
+def camera_rotation_derivative(
+    p_world_camera: np.ndarray, p_world_target: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """R_C^W and ∂R_C^W/∂c: (3, 3) and (3, 3, 3) whose ``[:, :, j]`` is ∂R/∂c_j.
+
+    Analytic: dx/dc = -(I - x xᵀ)/‖k - c‖; dy/dx = (I - y yᵀ) A / ‖A x‖ with A x =
+    (-x2, x1, 0); dz = dx × y + x × dy. At the vertical fallback y is constant.
+    """
+    x, y, z, _u, n, m = _frame(p_world_camera, p_world_target)
+    xx = x[:, None] * x[None, :]
+    dR = np.empty((3, 3, 3))  # dR[row i, column (x|y|z), j]
+    dx = (xx - _I3) / n  # column j = dx/dc_j
+    dR[:, 0, :] = dx
+    dy = ((_I3 - y[:, None] * y[None, :]) @ _A / m) @ dx if m > 0.0 else np.zeros((3, 3))
+    dR[:, 1, :] = dy
+    dR[:, 2, :] = skew(x) @ dy - skew(y) @ dx
+    R = np.empty((3, 3))
+    R[:, 0], R[:, 1], R[:, 2] = x, y, z
+    return R, dR
+
+
+def look_at_pose(p_world_camera: np.ndarray, p_world_target: np.ndarray) -> np.ndarray:
+    """Homogeneous T_world_camera (4, 4) of a camera at a point looking at a target."""
+    T = np.eye(4)
+    T[:3, :3] = camera_rotation(p_world_camera, p_world_target)
+    T[:3, 3] = p_world_camera
+    return T
+
+
+def project_point(p_camera: np.ndarray, focal_px: float, width_px: int, height_px: int) -> np.ndarray:
+    """Pixel (u, v) of a point in the paper's camera frame (x forward, y left, z up).
+
+    The image u axis points right (-y_C), v points down (-z_C); the principal point is the
+    image centre. Raises ValueError for points behind the camera.
+    """
+    p = np.asarray(p_camera, dtype=float)
+    if p[0] <= 0.0:
+        raise ValueError("point is behind the camera (x_C <= 0)")
+    u = 0.5 * width_px - focal_px * p[1] / p[0]
+    v = 0.5 * height_px - focal_px * p[2] / p[0]
+    return np.array([u, v])

@@ -1,0 +1,133 @@
+"""Baseline planners under the same constraints and step budget as the BVE.
+
+- :class:`RandomPlanner`: a uniformly random feasible point within the step limit.
+- :class:`CirclePlanner`: a fixed orbit about the vertical axis through the estimate,
+  advancing one step length a view and projected onto the feasible set; it reverses when
+  a constraint blocks the orbit.
+
+Both restore feasibility exactly as the BVE does when no point within reach is feasible.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bve_mj.config import Settings
+from bve_mj.estimation.belief import Belief
+from bve_mj.planning.constraints import (
+    Constraint,
+    ConstraintName,
+    ExtraConstraints,
+    StepLimit,
+    build_constraints,
+    check_constraint_names,
+    max_violation,
+)
+from bve_mj.planning.plan import PlanStatus, ViewPlan
+from bve_mj.planning.solve import feasible_start, minimise
+
+__all__ = ["CirclePlanner", "RandomPlanner"]
+
+
+def _restore_or_none(
+    task: Sequence[Constraint],
+    step: StepLimit,
+    c_now: np.ndarray,
+    k_hat: np.ndarray,
+    tol: float,
+    t0: float,
+) -> tuple[ViewPlan | None, np.ndarray]:
+    x, ok = feasible_start(task, step, c_now, tol)
+    if ok:
+        return None, x
+    plan = ViewPlan(x, k_hat, "restoring", False, max_violation(task, x), plan_s=time.perf_counter() - t0)
+    return plan, x
+
+
+@dataclass
+class RandomPlanner:
+    """A random feasible viewpoint within the step limit (rejection sampling in the ball)."""
+
+    settings: Settings
+    constraint_names: Sequence[ConstraintName]
+    rng: np.random.Generator
+    extra_constraints: ExtraConstraints | None = None
+    samples: int = 256
+
+    def __post_init__(self) -> None:
+        self.constraint_names = check_constraint_names(self.constraint_names)
+
+    def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        t0 = time.perf_counter()
+        tol = self.settings.planner.feasibility_tol
+        k_hat, c_now = belief.mean, np.asarray(p_world_camera, dtype=float)
+        r_d = self.settings.constraints.step_m
+        task = build_constraints(self.constraint_names, self.settings, k_hat, self.extra_constraints)
+        step = StepLimit(c_now, r_d)
+        d = self.rng.standard_normal((self.samples, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        candidates = c_now + d * (r_d * self.rng.random((self.samples, 1)) ** (1.0 / 3.0))
+        for x in candidates:
+            if max_violation(task, x) <= tol:
+                return ViewPlan(x, k_hat, "optimal", True, 0.0, plan_s=time.perf_counter() - t0)
+        restoring, x = _restore_or_none(task, step, c_now, k_hat, tol, t0)
+        if restoring is not None:
+            return restoring
+        return ViewPlan(x, k_hat, "best_feasible", True, 0.0, plan_s=time.perf_counter() - t0)
+
+
+@dataclass
+class CirclePlanner:
+    """Orbit the estimate about the world z axis, one step length per view."""
+
+    settings: Settings
+    constraint_names: Sequence[ConstraintName]
+    extra_constraints: ExtraConstraints | None = None
+    direction: float = field(default=1.0)
+
+    def __post_init__(self) -> None:
+        self.constraint_names = check_constraint_names(self.constraint_names)
+
+    def _orbit_target(self, k_hat: np.ndarray, c_now: np.ndarray) -> np.ndarray:
+        r_d = self.settings.constraints.step_m
+        u = c_now - k_hat
+        rho = math.hypot(u[0], u[1])
+        if rho < 1e-6:  # directly above or below: start the orbit along +x
+            u = u + np.array([r_d, 0.0, 0.0])
+            rho = r_d
+        angle = self.direction * min(r_d / rho, math.pi / 2)
+        ca, sa = math.cos(angle), math.sin(angle)
+        v = np.array([ca * u[0] - sa * u[1], sa * u[0] + ca * u[1], u[2]])
+        if "band" in self.constraint_names:  # hold the band's middle distance
+            v *= self.settings.constraints.band_distance_m / float(np.linalg.norm(v))
+        return k_hat + v
+
+    def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        t0 = time.perf_counter()
+        p = self.settings.planner
+        tol = p.feasibility_tol
+        k_hat, c_now = belief.mean, np.asarray(p_world_camera, dtype=float)
+        r_d = self.settings.constraints.step_m
+        task = build_constraints(self.constraint_names, self.settings, k_hat, self.extra_constraints)
+        step = StepLimit(c_now, r_d)
+        restoring, x_start = _restore_or_none(task, step, c_now, k_hat, tol, t0)
+        if restoring is not None:
+            return restoring
+        target = self._orbit_target(k_hat, x_start)
+
+        def distance_sq(x: np.ndarray) -> tuple[float, np.ndarray]:
+            d = x - target
+            return float(d @ d), 2.0 * d
+
+        every: list[Constraint] = [*task, step]
+        res = minimise(distance_sq, every, x_start, "slsqp", p.max_iterations)
+        x = res.x if np.all(np.isfinite(res.x)) and max_violation(every, res.x) <= tol else x_start
+        if float(np.linalg.norm(x - c_now)) < 0.25 * r_d:
+            self.direction = -self.direction  # blocked: go back along the orbit
+        status: PlanStatus = "optimal" if x is res.x else "best_feasible"
+        return ViewPlan(x, k_hat, status, True, 0.0, iterations=res.nit, plan_s=time.perf_counter() - t0)

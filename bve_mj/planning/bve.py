@@ -1,0 +1,147 @@
+"""The best-viewpoint estimator (BVE): the next camera position minimising the fused
+observation covariance under the paper's constraints.
+
+Each plan: (1) if the current position violates a task constraint, restore feasibility
+within the step limit (:func:`feasible_start`); if no point within reach is feasible,
+return the least-violating one flagged ``restoring``; (2) score the feasible start and 14
+fixed points on the step sphere (6 axis and 8 diagonal directions, at 0.9 r_d) and
+minimise the loss from the best ``starts`` of them with SLSQP or trust-constr; (3) keep the
+best answer that is feasible and no worse than its start, else the best start, flagged
+``best_feasible``. An infeasible viewpoint is never returned unflagged.
+
+Why several starts: the position just observed from is a stationary point of the loss (the
+filter's covariance is aligned with the ray it has just measured along), so a local
+optimiser started there alone never moves.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bve_mj.config import LossName, Settings
+from bve_mj.estimation.belief import Belief
+from bve_mj.planning.constraints import (
+    Constraint,
+    ConstraintName,
+    ExtraConstraints,
+    StepLimit,
+    build_constraints,
+    check_constraint_names,
+    max_violation,
+)
+from bve_mj.planning.information import ObservationInformation, observation_information
+from bve_mj.planning.losses import (
+    ApproachTerm,
+    DispersionLoss,
+    LossTerm,
+    MaxEigenvalueLoss,
+    Objective,
+    approach_activation,
+)
+from bve_mj.planning.plan import PlanStatus, ViewPlan
+from bve_mj.planning.solve import feasible_start, minimise
+
+__all__ = ["BvePlanner"]
+
+# The optimiser stops on absolute changes of the objective: the max-eigenvalue loss is in
+# m² (~1e-4), so it is handed to the optimiser in mm². A positive constant factor moves no
+# minimiser.
+_LOSS_SCALE: dict[str, float] = {"dispersion": 1.0, "max_eigenvalue": 1e6}
+
+_DIRECTIONS = np.array(
+    [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
+    + [[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)],
+    dtype=float,
+)
+_DIRECTIONS /= np.linalg.norm(_DIRECTIONS, axis=1, keepdims=True)
+
+
+@dataclass
+class BvePlanner:
+    """BVE planner (paper section 2.1) over the task constraints ``constraint_names``."""
+
+    settings: Settings
+    loss: LossName
+    constraint_names: Sequence[ConstraintName]
+    extra_constraints: ExtraConstraints | None = None
+    info: ObservationInformation = field(init=False)
+    _views_precision: np.ndarray | None = field(init=False, default=None)
+
+    def __post_init__(self) -> None:
+        self.constraint_names = check_constraint_names(self.constraint_names)
+        if self.loss not in _LOSS_SCALE:
+            from bve_mj.errors import ConfigError
+
+            raise ConfigError("loss", self.loss, "one of " + ", ".join(_LOSS_SCALE))
+        self.info = observation_information(self.settings)
+
+    def prior_precision(self, belief: Belief) -> np.ndarray:
+        """Σo⁻¹: the EKF's P⁻¹, or P0⁻¹ plus Λn of every view planned so far (eq. 9)."""
+        if self.settings.prior_source == "filter":
+            return belief.precision()
+        if self._views_precision is None:
+            self._views_precision = belief.precision()
+        return self._views_precision
+
+    def objective(self, belief: Belief, iteration: int) -> Objective:
+        """The BVE objective F(c) for this belief and iteration (eqs. 10-13)."""
+        k_hat = belief.mean
+        Lo = self.prior_precision(belief)
+        p = self.settings.planner
+        terms: list[LossTerm] = [
+            DispersionLoss(self.info, k_hat, Lo)
+            if self.loss == "dispersion"
+            else MaxEigenvalueLoss(self.info, k_hat, Lo, p.max_eigenvalue_trace_weight)
+        ]
+        act = approach_activation(iteration, p.approach_aggressiveness, p.approach_set_point)
+        if act > 0.0:
+            terms.append(ApproachTerm(k_hat, act))
+        return Objective(tuple(terms), _LOSS_SCALE[self.loss])
+
+    def task_constraints(self, k_hat: np.ndarray) -> list[Constraint]:
+        """Every task constraint around the estimate (the step limit is added in plan)."""
+        return build_constraints(self.constraint_names, self.settings, k_hat, self.extra_constraints)
+
+    def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        t0 = time.perf_counter()
+        p = self.settings.planner
+        tol = p.feasibility_tol
+        k_hat = belief.mean
+        c_now = np.asarray(p_world_camera, dtype=float)
+        task = self.task_constraints(k_hat)
+        step = StepLimit(c_now, self.settings.constraints.step_m)
+        x_start, ok = feasible_start(task, step, c_now, tol)
+        objective = self.objective(belief, iteration)
+
+        loss = objective.value
+        if not ok:
+            return ViewPlan(
+                x_start, k_hat, "restoring", False, max_violation(task, x_start), loss(x_start),
+                0, time.perf_counter() - t0,
+            )  # fmt: skip
+        every: list[Constraint] = [*task, step]
+        candidates = [x_start, *(c_now + 0.9 * step.step_m * _DIRECTIONS)]
+        scored = sorted((loss(x), i, x) for i, x in enumerate(candidates) if max_violation(every, x) <= tol)
+        best_f, _, best_x = scored[0]
+        status: PlanStatus = "best_feasible"
+        iterations = 0
+        for f0, _, x0 in scored[: p.starts]:
+            res = minimise(objective.value_and_gradient, every, x0, p.optimiser, p.max_iterations)
+            iterations += res.nit
+            f_res = res.fun / objective.scale
+            if not (np.all(np.isfinite(res.x)) and max_violation(every, res.x) <= tol and f_res <= f0):
+                continue
+            if f_res < best_f or status == "best_feasible":
+                if f_res <= best_f:
+                    best_f, best_x = f_res, res.x
+                status = "optimal" if res.success else status
+        if self._views_precision is not None:
+            self._views_precision = self._views_precision + self.info.information(best_x, k_hat)
+        return ViewPlan(
+            best_x, k_hat, status, True, max_violation(every, best_x), best_f, iterations,
+            time.perf_counter() - t0,
+        )  # fmt: skip

@@ -1,0 +1,51 @@
+"""The planner interface and its result record."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import numpy as np
+
+from bve_mj.estimation.belief import Belief
+
+__all__ = ["PlanStatus", "Planner", "ViewPlan"]
+
+PlanStatus = Literal["optimal", "best_feasible", "restoring"]
+"""optimal: the optimiser converged on a feasible point. best_feasible: it did not converge
+(or left the feasible set) and the best feasible point found is returned. restoring: no
+point within the step limit satisfies the task constraints; the returned point is the one
+that violates them least (it always satisfies the step limit)."""
+
+
+@dataclass(frozen=True)
+class ViewPlan:
+    """The next viewpoint.
+
+    Attributes:
+        p_world_camera: next camera position [m], (3,).
+        p_world_target: the point the camera looks at (the estimate when planned) [m], (3,).
+        status: see :data:`PlanStatus`.
+        feasible: every task constraint holds (to the planner's tolerance).
+        max_violation: largest constraint value at the returned point (0 if feasible).
+        loss: the objective at the returned point (NaN for baselines).
+        iterations: optimiser iterations spent.
+        plan_s: wall time of the plan [s].
+    """
+
+    p_world_camera: np.ndarray
+    p_world_target: np.ndarray
+    status: PlanStatus
+    feasible: bool
+    max_violation: float
+    loss: float = float("nan")
+    iterations: int = 0
+    plan_s: float = 0.0
+
+
+class Planner(Protocol):
+    """Chooses the next camera position from the belief and the current camera position."""
+
+    def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        """The next viewpoint; ``iteration`` counts planned views from 1."""
+        ...
