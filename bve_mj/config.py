@@ -42,6 +42,8 @@ __all__ = [
     "PlanningModel",
     "PriorSource",
     "ProtocolConfig",
+    "RobotConfig",
+    "RobotName",
     "Settings",
     "describe",
     "load_settings",
@@ -55,6 +57,8 @@ OptimiserName = Literal["slsqp", "trust-constr"]
 PlanningModel = Literal["paper", "consistent"]
 PlannerKind = Literal["bve", "random", "circle"]
 PriorSource = Literal["auto", "filter", "views"]
+RobotName = Literal["manipulator_h", "ur5", "panda"]
+Formulation = Literal["joint", "cartesian"]
 
 
 def _why(text: str, unit: str = "") -> dict[str, str]:
@@ -213,8 +217,12 @@ class FilterConfig:
     """The EKF: static fruit (F = I), process noise Q, prior P0, optional NIS gating."""
 
     process_sigma_m: float = field(
-        default=0.001,
-        metadata=_why("Q = (1 mm)^2 I per step: the fruit is static; a little Q absorbs model error", "m"),
+        default=0.0,
+        metadata=_why(
+            "Q = sigma^2 I per step; 0: the fruit is static and the synthetic world has no model "
+            "error (1 mm made the camera-mode filter conservative, NEES 1.7, and twice as wrong)",
+            "m",
+        ),
     )
     initial_sigma_m: float = field(
         default=0.15 / math.sqrt(3.0),
@@ -362,6 +370,34 @@ class ProtocolConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
+class RobotConfig:
+    """The arm for experiments with kinematic feasibility (E5, E10) and for episodes."""
+
+    name: RobotName = field(default="manipulator_h", metadata=_why("the paper's arm"))
+    joint_limits: str = field(
+        default="emanual",
+        metadata=_why(
+            "Manipulator-H: emanual = ROBOTIS operating ranges (J1 +-pi, J3 -pi/2..3pi/4, ...); "
+            "urdf = the URDF's conservative +-pi/2. Other arms: urdf"
+        ),
+    )
+    formulation: Formulation = field(
+        default="joint",
+        metadata=_why(
+            "kinematic feasibility: joint = optimise q (faster, succeeds more); cartesian = IK constraint"
+        ),
+    )
+
+    def __post_init__(self) -> None:
+        _choice("robot", "name", self.name, RobotName)
+        _choice("robot", "formulation", self.formulation, Formulation)
+        if self.joint_limits not in ("urdf", "emanual") or (
+            self.joint_limits == "emanual" and self.name != "manipulator_h"
+        ):
+            raise ConfigError("robot.joint_limits", self.joint_limits, "urdf, or emanual for manipulator_h")
+
+
+@dataclass(frozen=True, kw_only=True)
 class Settings:
     """Every setting of a synthetic (paper-protocol) run."""
 
@@ -372,6 +408,7 @@ class Settings:
     constraints: ConstraintConfig = field(default_factory=ConstraintConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -422,6 +459,7 @@ _SECTIONS: dict[str, type] = {
     "constraints": ConstraintConfig,
     "planner": PlannerConfig,
     "protocol": ProtocolConfig,
+    "robot": RobotConfig,
 }
 
 

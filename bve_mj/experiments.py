@@ -22,8 +22,9 @@ from bve_mj.episode import run_episode
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.belief import Belief
 from bve_mj.metrics import consistency_metrics, euclidean_metrics, paper_metrics
-from bve_mj.planning import make_planner
+from bve_mj.planning import Planner, make_planner
 from bve_mj.planning.constraints import ConstraintName
+from bve_mj.robot import arm_kinematics, get_robot, make_arm_planner
 from bve_mj.sim.synthetic import SyntheticWorld
 from bve_mj.sim.world import Scenario
 
@@ -33,6 +34,7 @@ __all__ = [
     "Experiment",
     "ExperimentSummary",
     "RunRecord",
+    "for_robot",
     "parse_experiments",
     "run_synthetic",
     "run_table",
@@ -132,14 +134,41 @@ class RunRecord:
     wall_s: float
 
 
+def for_robot(settings: Settings) -> Settings:
+    """``settings`` with the workspace sphere of the chosen arm (the paper's for Manipulator-H)."""
+    if settings.robot.name == "manipulator_h":
+        return settings
+    robot = get_robot(settings.robot.name)
+    return with_overrides(
+        settings,
+        constraints={
+            "workspace_centre_m": robot.workspace_centre_m,
+            "workspace_radius_m": robot.workspace_radius_m,
+        },
+    )
+
+
 def run_synthetic(settings: Settings, experiment: Experiment, seed: int, run: int) -> RunRecord:
-    """Run ``run`` of ``experiment`` in the synthetic world."""
+    """Run ``run`` of ``experiment`` in the synthetic world.
+
+    Experiments with the arm (E5, E10) start the camera where the arm at ``home`` holds it,
+    not at the protocol's random start (which the arm cannot reach); fruit, initial
+    estimate and noise are the same draws as every other experiment's run ``run``.
+    """
     scenario_ss, noise_ss, planner_ss = np.random.SeedSequence(seed, spawn_key=(run,)).spawn(3)
     scenario = sample_scenario(settings.protocol, np.random.default_rng(scenario_ss))
+    planner_rng = np.random.default_rng(planner_ss)
+    planner: Planner
+    if experiment.needs_arm:
+        kin = arm_kinematics(settings.robot.name, settings.robot.joint_limits)
+        p_start, _ = kin.camera_pose(kin.home)
+        scenario = dataclasses.replace(scenario, p_world_camera_start=p_start)
+        planner = make_arm_planner(
+            settings, experiment.loss, experiment.constraints, kin, kin.home, planner_rng
+        )
+    else:
+        planner = make_planner(settings, experiment.loss, experiment.constraints, planner_rng)
     world = SyntheticWorld(settings, scenario, np.random.default_rng(noise_ss))
-    planner = make_planner(
-        settings, experiment.loss, experiment.constraints, np.random.default_rng(planner_ss)
-    )
     prior = Belief.isotropic(scenario.initial_estimate, settings.filter.initial_sigma_m)
     result = run_episode(world, planner, prior, settings.filter, settings.protocol.steps)
     planned = result.views[1:]
@@ -208,11 +237,7 @@ def run_table(
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, ExperimentSummary]:
-    """Every runnable experiment × ``runs`` runs, spread over ``workers`` processes.
-
-    Experiments that need the arm (E5, E10) are returned with status ``needs_arm`` and no
-    runs until the robot layer provides the kinematic constraint.
-    """
+    """Every experiment × ``runs`` runs, spread over ``workers`` processes."""
     if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
         raise ConfigError("runs", runs, "an integer >= 1")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -220,7 +245,8 @@ def run_table(
     workers = workers or os.cpu_count() or 1
     if workers < 1:
         raise ConfigError("workers", workers, "an integer >= 1")
-    runnable = [e for e in experiments if not e.needs_arm]
+    settings = for_robot(settings)
+    runnable = list(experiments)
     chunk = max(1, min(25, runs // max(1, 2 * workers)))
     tasks = [
         (settings, e, seed, list(range(start, min(runs, start + chunk))))
@@ -243,13 +269,7 @@ def run_table(
                 records[batch[0].experiment].extend(batch)
                 if progress:
                     progress(done, total)
-    out: dict[str, ExperimentSummary] = {}
-    for e in experiments:
-        if e.needs_arm:
-            out[e.name] = ExperimentSummary(e.name, e.describe(), 0, {}, status="needs_arm")
-        else:
-            out[e.name] = summarise(e, sorted(records[e.name], key=lambda r: r.run))
-    return out
+    return {e.name: summarise(e, sorted(records[e.name], key=lambda r: r.run)) for e in experiments}
 
 
 def table_json(

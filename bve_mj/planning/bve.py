@@ -45,19 +45,19 @@ from bve_mj.planning.losses import (
 from bve_mj.planning.plan import PlanStatus, ViewPlan
 from bve_mj.planning.solve import feasible_start, minimise
 
-__all__ = ["BvePlanner"]
+__all__ = ["SEED_DIRECTIONS", "BvePlanner"]
 
 # The optimiser stops on absolute changes of the objective: the max-eigenvalue loss is in
 # m² (~1e-4), so it is handed to the optimiser in mm². A positive constant factor moves no
 # minimiser.
 _LOSS_SCALE: dict[str, float] = {"dispersion": 1.0, "max_eigenvalue": 1e6}
 
-_DIRECTIONS = np.array(
+SEED_DIRECTIONS = np.array(
     [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
     + [[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)],
     dtype=float,
 )
-_DIRECTIONS /= np.linalg.norm(_DIRECTIONS, axis=1, keepdims=True)
+SEED_DIRECTIONS /= np.linalg.norm(SEED_DIRECTIONS, axis=1, keepdims=True)
 
 
 @dataclass
@@ -107,6 +107,21 @@ class BvePlanner:
         return build_constraints(self.constraint_names, self.settings, k_hat, self.extra_constraints)
 
     def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        """:meth:`propose` a viewpoint, then :meth:`commit` it."""
+        plan = self.propose(belief, p_world_camera, iteration)
+        self.commit(plan)
+        return plan
+
+    def commit(self, plan: ViewPlan) -> None:
+        """Record that the camera goes to ``plan``: with ``prior_source = views`` its Σn is
+        fused into Σo (eq. 9)."""
+        if self._views_precision is not None:
+            self._views_precision = self._views_precision + self.info.information(
+                plan.p_world_camera, plan.p_world_target
+            )
+
+    def propose(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        """The best viewpoint for this belief, without changing the planner's state."""
         t0 = time.perf_counter()
         p = self.settings.planner
         tol = p.feasibility_tol
@@ -124,7 +139,7 @@ class BvePlanner:
                 0, time.perf_counter() - t0,
             )  # fmt: skip
         every: list[Constraint] = [*task, step]
-        candidates = [x_start, *(c_now + 0.9 * step.step_m * _DIRECTIONS)]
+        candidates = [x_start, *(c_now + 0.9 * step.step_m * SEED_DIRECTIONS)]
         scored = sorted((loss(x), i, x) for i, x in enumerate(candidates) if max_violation(every, x) <= tol)
         best_f, _, best_x = scored[0]
         status: PlanStatus = "best_feasible"
@@ -139,8 +154,6 @@ class BvePlanner:
                 if f_res <= best_f:
                     best_f, best_x = f_res, res.x
                 status = "optimal" if res.success else status
-        if self._views_precision is not None:
-            self._views_precision = self._views_precision + self.info.information(best_x, k_hat)
         return ViewPlan(
             best_x, k_hat, status, True, max_violation(every, best_x), best_f, iterations,
             time.perf_counter() - t0,

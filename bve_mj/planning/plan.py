@@ -31,6 +31,7 @@ class ViewPlan:
         loss: the objective at the returned point (NaN for baselines).
         iterations: optimiser iterations spent.
         plan_s: wall time of the plan [s].
+        q: joint configuration that realises the viewpoint, when an arm is planned for.
     """
 
     p_world_camera: np.ndarray
@@ -41,6 +42,7 @@ class ViewPlan:
     loss: float = float("nan")
     iterations: int = 0
     plan_s: float = 0.0
+    q: np.ndarray | None = None
 
 
 class Planner(Protocol):

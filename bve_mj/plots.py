@@ -1,0 +1,81 @@
+"""Figures (matplotlib, an optional extra: ``pip install bve_mj[plots]``), imported lazily."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from bve_mj.episode import EpisodeResult
+from bve_mj.errors import ConfigError
+
+__all__ = ["plot_sample_paths"]
+
+
+def _pyplot():  # type: ignore[no-untyped-def]
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise ConfigError("plots", "matplotlib", "installed: pip install 'bve_mj[plots]'") from None
+    return plt
+
+
+def plot_sample_paths(
+    episodes: Sequence[tuple[str, EpisodeResult, np.ndarray]],
+    path: str | Path,
+    columns: int = 2,
+    workspace: tuple[np.ndarray, float] | None = None,
+) -> Path:
+    """The paper's Fig. 4: camera positions (blue, light to dark in time), true fruit (red),
+    estimates (green), equal axes; optionally the workspace sphere (centre, radius) [m].
+
+    ``episodes``: (title, result, true fruit position) triples. Writes a PNG; returns its path.
+    """
+    plt = _pyplot()
+    rows = (len(episodes) + columns - 1) // columns
+    fig = plt.figure(figsize=(5.0 * columns, 4.4 * rows), dpi=110)
+    for i, (title, result, truth) in enumerate(episodes):
+        ax = fig.add_subplot(rows, columns, i + 1, projection="3d")
+        cams = np.array([v.p_world_camera for v in result.views])
+        est = np.array([result.prior.mean] + [v.belief.mean for v in result.views])
+        ax.plot(*cams.T, "-", color="#4aa3df", lw=0.8)
+        shade = np.linspace(0.25, 1.0, len(cams))
+        ax.scatter(*cams.T, c=shade, cmap="Blues", vmin=0.0, vmax=1.0, s=12, label="camera (light→dark)")
+        ax.scatter(*cams[0], color="k", marker="^", s=30, label="start")
+        if workspace is not None:
+            centre, radius = workspace
+            u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 24), np.linspace(0, np.pi, 12))
+            ax.plot_wireframe(
+                centre[0] + radius * np.cos(u) * np.sin(v),
+                centre[1] + radius * np.sin(u) * np.sin(v),
+                centre[2] + radius * np.cos(v),
+                color="0.8",
+                lw=0.3,
+            )
+        ax.plot(*est.T, "-", color="#2ca02c", lw=0.8)
+        ax.scatter(*est[-1], color="#2ca02c", s=40, label="final estimate")
+        ax.scatter(*truth, color="#d62728", s=60, marker="*", label="true fruit")
+        err_mm = 1e3 * float(np.linalg.norm(result.final.mean - truth))
+        ax.set_title(f"{title}\nfinal error {err_mm:.0f} mm", fontsize=9)
+        ax.set_xlabel("x [m]", fontsize=8)
+        ax.set_ylabel("y [m]", fontsize=8)
+        ax.set_zlabel("z [m]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        pts = np.vstack([cams, est, truth[None, :]])
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        mid, half = (lo + hi) / 2, max(float((hi - lo).max()) / 2, 0.1)
+        ax.set_xlim(mid[0] - half, mid[0] + half)
+        ax.set_ylim(mid[1] - half, mid[1] + half)
+        ax.set_zlim(mid[2] - half, mid[2] + half)
+        ax.set_box_aspect((1, 1, 1))
+        if i == 0:
+            ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out)
+    plt.close(fig)
+    return out

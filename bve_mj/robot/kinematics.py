@@ -1,0 +1,115 @@
+"""Arm kinematics with Pinocchio: camera pose, Jacobians, joint limits.
+
+Frames: the camera frame's x axis is the optical axis. Jacobians are in
+LOCAL_WORLD_ALIGNED: rows 0-2 the velocity of the camera centre in world axes, rows 3-5
+the angular velocity in world axes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import pinocchio as pin
+
+from bve_mj.errors import ConfigError
+from bve_mj.robot.description import RobotDescription, get_robot
+
+__all__ = ["CAMERA_FRAME", "ArmKinematics"]
+
+CAMERA_FRAME = "bve_camera"
+"""Name of the camera frame added to every arm's Pinocchio model."""
+
+
+@dataclass(frozen=True)
+class _Limits:
+    lower: np.ndarray
+    upper: np.ndarray
+
+
+class ArmKinematics:
+    """Forward kinematics and Jacobians of an arm's eye-in-hand camera.
+
+    Args:
+        robot: the description.
+        limit_set: a key of ``robot.limit_sets`` ("urdf" = the file's own ranges).
+    """
+
+    def __init__(self, robot: RobotDescription, limit_set: str = "urdf") -> None:
+        self.robot = robot
+        full = pin.buildModelFromUrdf(str(robot.urdf_path))
+        missing = [j for j in robot.arm_joints if not full.existJointName(j)]
+        if missing:
+            raise ConfigError("robot.arm_joints", missing, f"joints of {robot.urdf_path.name}")
+        lock = [
+            full.getJointId(full.names[i])
+            for i in range(1, full.njoints)
+            if full.names[i] not in robot.arm_joints
+        ]
+        model = pin.buildReducedModel(full, lock, pin.neutral(full)) if lock else full
+        parent = model.getFrameId(robot.camera_parent_frame)
+        if parent >= len(model.frames):
+            raise ConfigError("robot.camera_parent_frame", robot.camera_parent_frame, "a frame of the URDF")
+        pf = model.frames[parent]
+        placement = pf.placement * pin.SE3(robot.T_parent_camera[:3, :3], robot.T_parent_camera[:3, 3])
+        self.camera_frame_id = model.addFrame(
+            pin.Frame(CAMERA_FRAME, pf.parentJoint, parent, placement, pin.FrameType.OP_FRAME)
+        )
+        self.model = model
+        self.data = model.createData()
+        self.joint_names = tuple(model.names[i] for i in range(1, model.njoints))
+        if self.joint_names != robot.arm_joints:
+            raise ConfigError("robot.arm_joints", robot.arm_joints, f"the URDF order {self.joint_names}")
+        if limit_set == "urdf":
+            lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
+        elif limit_set in robot.limit_sets:
+            lower, upper = (np.array(x, dtype=float) for x in zip(*robot.limit_sets[limit_set], strict=True))
+        else:
+            allowed = ", ".join(["urdf", *robot.limit_sets])
+            raise ConfigError("robot.joint_limits", limit_set, f"one of {allowed} for {robot.name}")
+        model.lowerPositionLimit[:] = lower
+        model.upperPositionLimit[:] = upper
+        self.limit_set = limit_set
+        self.limits = _Limits(lower, upper)
+        self.nq = model.nq
+        self.home = np.array(robot.home, dtype=float)
+        if self.home.shape != (self.nq,):
+            raise ConfigError("robot.home", robot.home, f"{self.nq} joint angles")
+        self.home = self.clip(self.home)
+
+    # ------------------------------------------------------------------ queries
+    def clip(self, q: np.ndarray) -> np.ndarray:
+        """q clipped into the joint limits."""
+        return np.minimum(np.maximum(np.asarray(q, dtype=float), self.limits.lower), self.limits.upper)
+
+    def within_limits(self, q: np.ndarray, tol: float = 1e-9) -> bool:
+        q = np.asarray(q, dtype=float)
+        return bool(np.all(q >= self.limits.lower - tol) and np.all(q <= self.limits.upper + tol))
+
+    def random_configuration(self, rng: np.random.Generator) -> np.ndarray:
+        """q uniform within the joint limits."""
+        return rng.uniform(self.limits.lower, self.limits.upper)
+
+    def camera_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(p_world_camera (3,), R_world_camera (3, 3)) at configuration q."""
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        M = self.data.oMf[self.camera_frame_id]
+        return M.translation.copy(), M.rotation.copy()
+
+    def camera_pose_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Camera position, rotation and the 6×n Jacobian (LOCAL_WORLD_ALIGNED)."""
+        q = np.asarray(q, dtype=float)
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacement(self.model, self.data, self.camera_frame_id)
+        J = pin.getFrameJacobian(
+            self.model, self.data, self.camera_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        )
+        M = self.data.oMf[self.camera_frame_id]
+        return M.translation.copy(), M.rotation.copy(), J.copy()
+
+
+@lru_cache(maxsize=8)
+def arm_kinematics(name: str, limit_set: str) -> ArmKinematics:
+    """A per-process shared :class:`ArmKinematics` (Pinocchio model and data) for an arm."""
+    return ArmKinematics(get_robot(name), limit_set)

@@ -1,0 +1,319 @@
+"""Kinematic feasibility in the BVE (paper E5/E10): the next camera pose must be reachable.
+
+Two formulations (``RobotConfig.formulation``):
+
+- ``joint``: optimise the joint angles q. The camera position is FK(q); the loss and every
+  task constraint act on it through the camera Jacobian; the optical axis must pass
+  through the estimate (two equalities, y_C·d = z_C·d = 0, and x_C·d ≥ 0); joint limits are
+  bounds. Seeds: the current configuration and the IK of the kinematics-free BVE optimum.
+- ``cartesian``: the kinematics-free BVE over the camera position with one more task
+  constraint, :class:`Reachability`: the look-at IK residual at c (warm-started), with a
+  finite-difference gradient.
+
+Both return plans whose IK is verified: a plan flagged feasible has a configuration within
+the joint limits that puts the camera there looking at the estimate.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import minimize
+
+from bve_mj.config import LossName, Settings
+from bve_mj.errors import ConfigError
+from bve_mj.estimation.belief import Belief
+from bve_mj.geometry import skew
+from bve_mj.planning.baselines import CirclePlanner, RandomPlanner
+from bve_mj.planning.bve import SEED_DIRECTIONS, BvePlanner
+from bve_mj.planning.constraints import Constraint, ConstraintName, StepLimit, max_violation
+from bve_mj.planning.plan import Planner, PlanStatus, ViewPlan
+from bve_mj.robot.ik import IkOptions, IkResult, look_at_ik
+from bve_mj.robot.kinematics import ArmKinematics
+
+__all__ = ["KinematicBvePlanner", "Reachability", "make_arm_planner"]
+
+_AXIS_TOL_RAD = 1e-3
+_PLAN_IK = IkOptions(restarts=1, max_iterations=40)  # inside a plan the seed (current q) is close
+
+
+@dataclass
+class Reachability:
+    """g(c) = IK residual of "camera at c looking at k̂" minus a tolerance [m] (≤ 0: reachable).
+
+    The residual is ‖p(q) - c‖ + ρ·angle(x_C(q), k̂ - c) at the IK's best q, ρ = 0.1 m/rad.
+    Warm-started from the last solution; gradient by central differences.
+    """
+
+    kin: ArmKinematics
+    k_hat: np.ndarray
+    q_warm: np.ndarray
+    tol_m: float = 2e-4
+    name: str = "reachable"
+    last: IkResult | None = field(default=None, init=False)
+    _rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0), init=False)
+
+    def _residual(self, c: np.ndarray, restarts: int) -> float:
+        res = look_at_ik(self.kin, c, self.k_hat, self.q_warm, self._rng, IkOptions(restarts=restarts))
+        if res.success:
+            self.q_warm = res.q
+        self.last = res
+        return res.position_error_m + 0.1 * res.axis_error_rad
+
+    def value(self, c: np.ndarray) -> float:
+        return self._residual(np.asarray(c, dtype=float), restarts=4) - self.tol_m
+
+    def gradient(self, c: np.ndarray) -> np.ndarray:
+        h = 1e-4
+        g = np.zeros(3)
+        for j in range(3):
+            e = np.zeros(3)
+            e[j] = h
+            g[j] = (self._residual(c + e, 0) - self._residual(c - e, 0)) / (2 * h)
+        return g
+
+
+@dataclass
+class _JointProblem:
+    """Camera position, axes, Jacobian and look-at terms at q, cached for SciPy's calls."""
+
+    kin: ArmKinematics
+    k_hat: np.ndarray
+    _q: np.ndarray | None = None
+    _pose: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    _look: tuple[np.ndarray, np.ndarray] | None = None
+
+    def at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self._q is None or not np.array_equal(q, self._q):
+            self._q = np.array(q, dtype=float)
+            self._pose = self.kin.camera_pose_and_jacobian(self._q)
+            self._look = None
+        assert self._pose is not None
+        return self._pose
+
+    def look_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """h = (y_C·d, z_C·d, x_C·d) and its Jacobian (3, n); d = unit(k̂ - c)."""
+        p, R, J = self.at(q)
+        if self._look is None:
+            u = self.k_hat - p
+            rho = float(np.linalg.norm(u))
+            d = u / rho
+            dd = ((np.outer(d, d) - np.eye(3)) / rho) @ J[:3]  # ∂d/∂q
+            Jw = J[3:]
+            h = np.empty(3)
+            dh = np.empty((3, J.shape[1]))
+            for row, axis in enumerate((1, 2, 0)):
+                a = R[:, axis]
+                da = -skew(a) @ Jw  # ∂a/∂q_i = ω_i × a
+                h[row] = a @ d
+                dh[row] = d @ da + a @ dd
+            self._look = (h, dh)
+        return self._look
+
+
+@dataclass
+class KinematicBvePlanner:
+    """The BVE with the arm's kinematic feasibility (E5, E10)."""
+
+    settings: Settings
+    loss: LossName
+    constraint_names: Sequence[ConstraintName]
+    kin: ArmKinematics
+    q: np.ndarray
+    formulation: str = "joint"
+    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    _bve: BvePlanner = field(init=False)
+
+    def __post_init__(self) -> None:
+        if self.formulation not in ("joint", "cartesian"):
+            raise ConfigError("robot.formulation", self.formulation, "one of joint, cartesian")
+        self.q = self.kin.clip(self.q)
+        extra = self._reachability if self.formulation == "cartesian" else None
+        self._bve = BvePlanner(self.settings, self.loss, self.constraint_names, extra)
+
+    def _reachability(self, k_hat: np.ndarray) -> list[Constraint]:
+        return [Reachability(self.kin, k_hat, self.q)]
+
+    # ------------------------------------------------------------------ plan
+    def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        t0 = time.perf_counter()
+        c_now = np.asarray(p_world_camera, dtype=float)
+        if self.formulation == "cartesian":
+            plan = self._plan_cartesian(belief, c_now, iteration, t0)
+        else:
+            plan = self._plan_joint(belief, c_now, iteration, t0)
+        self._bve.commit(plan)
+        if plan.q is not None:
+            self.q = plan.q.copy()
+        return plan
+
+    def _plan_cartesian(self, belief: Belief, c_now: np.ndarray, iteration: int, t0: float) -> ViewPlan:
+        plan = self._bve.propose(belief, c_now, iteration)
+        ik = look_at_ik(self.kin, plan.p_world_camera, plan.p_world_target, self.q, self.rng, _PLAN_IK)
+        if ik.success:
+            return dataclasses.replace(plan, plan_s=time.perf_counter() - t0, q=ik.q)
+        # the optimiser's point is not reachable after all: stay where the arm is, flagged
+        p, _ = self.kin.camera_pose(self.q)
+        return ViewPlan(p, plan.p_world_target, "restoring", False, ik.position_error_m, plan.loss,
+                        plan.iterations, time.perf_counter() - t0, self.q.copy())  # fmt: skip
+
+    def _plan_joint(self, belief: Belief, c_now: np.ndarray, iteration: int, t0: float) -> ViewPlan:
+        tol = self.settings.planner.feasibility_tol
+        k_hat = belief.mean
+        task = self._bve.task_constraints(k_hat)
+        step = StepLimit(c_now, self.settings.constraints.step_m)
+        every: list[Constraint] = [*task, step]
+        objective = self._bve.objective(belief, iteration)
+        prob = _JointProblem(self.kin, k_hat)
+        bounds = list(zip(self.kin.limits.lower, self.kin.limits.upper, strict=True))
+
+        def f(q: np.ndarray) -> tuple[float, np.ndarray]:
+            p, _, J = prob.at(q)
+            v, g = objective.value_and_gradient(p)
+            return v, J[:3].T @ g
+
+        def ineq(q: np.ndarray) -> np.ndarray:  # SciPy: ≥ 0
+            p, _, _ = prob.at(q)
+            h, _ = prob.look_at(q)
+            return np.array([-gi.value(p) for gi in every] + [h[2]])
+
+        def ineq_jac(q: np.ndarray) -> np.ndarray:
+            p, _, J = prob.at(q)
+            _, dh = prob.look_at(q)
+            return np.array([-(J[:3].T @ gi.gradient(p)) for gi in every] + [dh[2]])
+
+        def eq(q: np.ndarray) -> np.ndarray:
+            return prob.look_at(q)[0][:2]
+
+        def eq_jac(q: np.ndarray) -> np.ndarray:
+            return prob.look_at(q)[1][:2]
+
+        def verify(q: np.ndarray) -> tuple[bool, float, np.ndarray]:
+            p, R = self.kin.camera_pose(q)
+            d = (k_hat - p) / np.linalg.norm(k_hat - p)
+            axis_err = math.acos(float(np.clip(R[:, 0] @ d, -1.0, 1.0)))
+            ok = self.kin.within_limits(q) and max_violation(every, p) <= tol and axis_err <= _AXIS_TOL_RAD
+            return ok, axis_err, p
+
+        # Seeds: the current configuration (often a stationary point of the loss: the view
+        # just taken) and the best-scoring feasible point of the BVE's seed directions,
+        # mapped to joint space by one pseudo-inverse step.
+        seeds = [self.q]
+        candidates = c_now + 0.9 * step.step_m * SEED_DIRECTIONS
+        scored = [(objective.value(x), i) for i, x in enumerate(candidates) if max_violation(task, x) <= tol]
+        if scored:
+            c_best = candidates[min(scored)[1]]
+            _, _, J = prob.at(self.q)
+            seeds.append(self.kin.clip(self.q + np.linalg.pinv(J[:3]) @ (c_best - c_now)))
+        best: tuple[float, np.ndarray] | None = None
+        iterations = 0
+        for q0 in seeds:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                res = minimize(
+                    f, q0, jac=True, method="SLSQP", bounds=bounds,
+                    constraints=[{"type": "ineq", "fun": ineq, "jac": ineq_jac},
+                                 {"type": "eq", "fun": eq, "jac": eq_jac}],
+                    options={"maxiter": self.settings.planner.max_iterations, "ftol": 1e-10},
+                )  # fmt: skip
+            iterations += int(res.nit)
+            q = self.kin.clip(res.x)
+            ok, _, p = verify(q)
+            if ok:
+                value = objective.value(p)
+                if best is None or value < best[0]:
+                    best = (value, q)
+        if best is not None:
+            p, _ = self.kin.camera_pose(best[1])
+            return ViewPlan(p, k_hat, "optimal", True, max_violation(every, p), best[0],
+                            iterations, time.perf_counter() - t0, best[1])  # fmt: skip
+        return self._restore(k_hat, task, step, c_now, t0, iterations)
+
+    def _restore(
+        self, k_hat: np.ndarray, task: Sequence[Constraint], step: StepLimit, c_now: np.ndarray,
+        t0: float, iterations: int,
+    ) -> ViewPlan:  # fmt: skip
+        """No reachable feasible pose within the step: the pose within the step that violates
+        the task constraints and the look-at condition least (min t s.t. g_i(c(q)) ≤ t,
+        1 - x_C·d ≤ t, step(c(q)) ≤ 0, q within limits)."""
+        tol = self.settings.planner.feasibility_tol
+        prob = _JointProblem(self.kin, k_hat)
+        n = self.kin.nq
+        bounds = [*zip(self.kin.limits.lower, self.kin.limits.upper, strict=True), (-1e-4, None)]
+
+        def obj(z: np.ndarray) -> tuple[float, np.ndarray]:
+            g = np.zeros(n + 1)
+            g[n] = 1.0
+            return float(z[n]), g
+
+        def cons(z: np.ndarray) -> np.ndarray:  # ≥ 0
+            q, t = z[:n], z[n]
+            p, _, _ = prob.at(q)
+            h, _ = prob.look_at(q)
+            return np.array([t - gi.value(p) for gi in task] + [t - (1.0 - h[2]), -step.value(p)])
+
+        def cons_jac(z: np.ndarray) -> np.ndarray:
+            q = z[:n]
+            p, _, J = prob.at(q)
+            _, dh = prob.look_at(q)
+            rows = [np.append(-(J[:3].T @ gi.gradient(p)), 1.0) for gi in task]
+            rows.append(np.append(dh[2], 1.0))
+            rows.append(np.append(-(J[:3].T @ step.gradient(p)), 0.0))
+            return np.array(rows)
+
+        p0, _, _ = prob.at(self.q)
+        h0, _ = prob.look_at(self.q)
+        t_start = max([1.0 - h0[2], *(gi.value(p0) for gi in task)])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = minimize(
+                obj, np.append(self.q, t_start), jac=True, method="SLSQP", bounds=bounds,
+                constraints=[{"type": "ineq", "fun": cons, "jac": cons_jac}],
+                options={"maxiter": self.settings.planner.max_iterations, "ftol": 1e-12},
+            )  # fmt: skip
+        q = self.kin.clip(res.x[:n])
+        p, _ = self.kin.camera_pose(q)
+        if not np.all(np.isfinite(q)) or step.value(p) > tol:  # the solver wandered: stay
+            q = self.q
+            p, _ = self.kin.camera_pose(q)
+        h, _ = prob.look_at(q)
+        worst = max([1.0 - h[2], *(gi.value(p) for gi in task)])
+        ok = worst <= tol and math.acos(float(np.clip(h[2], -1.0, 1.0))) <= _AXIS_TOL_RAD
+        status: PlanStatus = "best_feasible" if ok else "restoring"
+        return ViewPlan(p, k_hat, status, ok, max(0.0, worst), float("nan"),
+                        iterations + int(res.nit), time.perf_counter() - t0, q.copy())  # fmt: skip
+
+
+def make_arm_planner(
+    settings: Settings,
+    loss: LossName,
+    constraint_names: Sequence[ConstraintName],
+    kin: ArmKinematics,
+    q_start: np.ndarray,
+    rng: np.random.Generator,
+) -> Planner:
+    """``settings.planner.kind`` with the arm's kinematic feasibility added.
+
+    The BVE uses ``settings.robot.formulation``; the baselines get the :class:`Reachability`
+    constraint, so they too only ever choose viewpoints the arm can take.
+    """
+    kind = settings.planner.kind
+    if kind == "bve":
+        return KinematicBvePlanner(
+            settings, loss, constraint_names, kin, q_start, settings.robot.formulation, rng
+        )
+    reach = Reachability(kin, np.zeros(3), kin.clip(q_start))
+
+    def extra(k_hat: np.ndarray) -> list[Constraint]:
+        reach.k_hat = k_hat
+        return [reach]
+
+    if kind == "random":
+        return RandomPlanner(settings, constraint_names, rng, extra)
+    return CirclePlanner(settings, constraint_names, extra)

@@ -1,0 +1,19 @@
+"""The paper's table from Python (the same as `bve-mj paper --runs 20`).
+
+python examples/paper_table.py
+"""
+
+from __future__ import annotations
+
+from bve_mj import EXPERIMENTS, Settings, run_table
+from bve_mj.cli import format_table
+from bve_mj.experiments import PAPER_RESULTS
+
+
+def main() -> None:
+    summaries = run_table(Settings(), list(EXPERIMENTS.values()), runs=20, seed=0)
+    print("\n".join(format_table(summaries, PAPER_RESULTS)))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,145 @@
+"""Every analytic gradient of the planner against central finite differences."""
+
+import math
+
+import numpy as np
+import pytest
+
+from bve_mj.planning import (
+    ApproachTerm,
+    CameraInformation,
+    DispersionLoss,
+    DistanceBand,
+    FieldOfViewCone,
+    MaxEigenvalueLoss,
+    OutsideFruit,
+    PlantWall,
+    RangeInformation,
+    StepLimit,
+    WorkspaceSphere,
+)
+from tests.conftest import finite_difference
+
+SIGMA_C = np.diag([0.092**2, 0.0021**2, 0.0021**2])
+SIGMA_C_ANISO = np.diag([0.09**2, 0.002**2, 0.004**2])
+
+
+def random_spd(rng, scale=0.05):
+    A = rng.standard_normal((3, 3))
+    return scale**2 * (A @ A.T + 0.2 * np.eye(3))
+
+
+def random_point_pair(rng):
+    k = rng.uniform(-1, 1, 3)
+    direction = rng.standard_normal(3)
+    c = k + rng.uniform(0.3, 1.5) * direction / np.linalg.norm(direction)
+    return c, k
+
+
+INFOS = {
+    "camera": CameraInformation(SIGMA_C),
+    "camera_anisotropic": CameraInformation(SIGMA_C_ANISO),
+    "range": RangeInformation(0.092**2),
+}
+
+
+@pytest.mark.parametrize("name", list(INFOS))
+def test_information_derivative(name, rng):
+    info = INFOS[name]
+    for _ in range(50):
+        c, k = random_point_pair(rng)
+        L, dL = info.information_derivative(c, k)
+        np.testing.assert_allclose(L, info.information(c, k), rtol=1e-12)
+        fd = finite_difference(lambda x, k=k: info.information(x, k), c)
+        np.testing.assert_allclose(dL, fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
+
+
+def _check_term(term, c):
+    value, grad = term.value_and_gradient(c)
+    assert value == pytest.approx(term.value(c), rel=1e-12, abs=1e-15)
+    fd = finite_difference(term.value, c, h=1e-6)
+    np.testing.assert_allclose(grad, fd, rtol=1e-4, atol=1e-7 * max(1.0, np.abs(fd).max()))
+
+
+@pytest.mark.parametrize("name", list(INFOS))
+def test_dispersion_gradient(name, rng):
+    for _ in range(50):
+        c, k = random_point_pair(rng)
+        _check_term(DispersionLoss(INFOS[name], k, np.linalg.inv(random_spd(rng))), c)
+
+
+@pytest.mark.parametrize("name", list(INFOS))
+@pytest.mark.parametrize("trace_weight", [0.0, 0.5])
+def test_max_eigenvalue_gradient(name, trace_weight, rng):
+    checked = 0
+    while checked < 50:
+        c, k = random_point_pair(rng)
+        loss = MaxEigenvalueLoss(INFOS[name], k, np.linalg.inv(random_spd(rng)), trace_weight)
+        w = np.linalg.eigvalsh(INFOS[name].information(c, k) + loss.prior_precision)
+        if w[1] - w[0] < 1e-3 * w[0]:
+            continue  # λmax repeated: not differentiable there
+        _check_term(loss, c)
+        checked += 1
+
+
+def test_max_eigenvalue_value_is_eq_11_when_tau_is_zero(rng):
+    c, k = random_point_pair(rng)
+    Lo = np.linalg.inv(random_spd(rng))
+    loss = MaxEigenvalueLoss(INFOS["camera"], k, Lo)
+    Sigma_n = INFOS["camera"].information(c, k)
+    Su = np.linalg.inv(Sigma_n + Lo)
+    assert loss.value(c) == pytest.approx(max(abs(np.linalg.eigvals(Su))))
+
+
+def test_dispersion_value_is_eq_10(rng):
+    c, k = random_point_pair(rng)
+    Sigma_o = random_spd(rng)
+    R = np.column_stack([(k - c) / np.linalg.norm(k - c), [-(k - c)[1], (k - c)[0], 0.0], [0.0, 0.0, 0.0]])
+    R[:, 1] /= np.linalg.norm(R[:, 1])
+    R[:, 2] = np.cross(R[:, 0], R[:, 1])
+    Sigma_n = R @ SIGMA_C @ R.T  # eq. 3
+    expected = -math.log(np.linalg.det(np.linalg.inv(Sigma_n) + np.linalg.inv(Sigma_o)))
+    loss = DispersionLoss(INFOS["camera"], k, np.linalg.inv(Sigma_o))
+    assert loss.value(c) == pytest.approx(expected, rel=1e-9)
+
+
+def test_approach_gradient(rng):
+    for _ in range(20):
+        c, k = random_point_pair(rng)
+        _check_term(ApproachTerm(k, rng.uniform(0.1, 2.0)), c)
+
+
+def _constraints(rng):
+    k = rng.uniform(-1, 1, 3)
+    return [
+        DistanceBand(k, 1.0, 0.1),
+        WorkspaceSphere(np.array([0.0, 0.0, 0.159]), 0.645),
+        OutsideFruit(k, 0.035),
+        FieldOfViewCone(k, 0.035, math.radians(69)),
+        PlantWall(k, 0.1),
+        StepLimit(rng.uniform(-2, 2, 3), 0.2),
+    ]
+
+
+def test_every_constraint_gradient(rng):
+    for _ in range(50):
+        c = rng.uniform(-2, 2, 3)
+        for g in _constraints(rng):
+            fd = finite_difference(g.value, c)
+            np.testing.assert_allclose(g.gradient(c), fd, rtol=1e-6, atol=1e-8, err_msg=g.name)
+
+
+def test_constraint_values_match_the_paper():
+    k = np.array([0.5, 0.5, 0.2])
+    # eq. 20: inside the band ⟺ value ≤ 0
+    band = DistanceBand(k, 1.0, 0.1)
+    assert band.value(k + np.array([0.95, 0, 0])) < 0 < band.value(k + np.array([1.15, 0, 0]))
+    assert band.value(k + np.array([0.85, 0, 0])) > 0
+    # eqs. 17-19: the wall is d = 0.1 m in front of the fruit, towards the robot base
+    wall = PlantWall(k, 0.1)
+    e_n = np.array([1.0, 1.0, 0.0]) / np.sqrt(2)
+    assert wall.value(k - 0.05 * e_n) > 0 > wall.value(k - 0.15 * e_n)
+    # eq. 16 corrected: fruit of radius r in a cone of half-angle θ ⟺ d ≥ r / sin θ
+    cone = FieldOfViewCone(k, 0.035, math.radians(69))
+    d_min = 0.035 / math.sin(math.radians(34.5))
+    assert cone.value(k + np.array([d_min * 1.01, 0, 0])) < 0 < cone.value(k + np.array([d_min * 0.99, 0, 0]))
