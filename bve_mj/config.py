@@ -31,6 +31,7 @@ else:  # pragma: no cover
 __all__ = [
     "CameraConfig",
     "ConstraintConfig",
+    "DetectorConfig",
     "FilterConfig",
     "FruitPrior",
     "LossName",
@@ -44,6 +45,8 @@ __all__ = [
     "ProtocolConfig",
     "RobotConfig",
     "RobotName",
+    "SceneConfig",
+    "SensorConfig",
     "Settings",
     "describe",
     "load_settings",
@@ -397,6 +400,111 @@ class RobotConfig:
             raise ConfigError("robot.joint_limits", self.joint_limits, "urdf, or emanual for manipulator_h")
 
 
+def _range(section: str, name: str, value: Any, lo: float = -math.inf) -> tuple[float, float]:
+    try:
+        a, b = (float(x) for x in value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{section}.{name}", value, "a pair (low, high)") from None
+    if not (math.isfinite(a) and math.isfinite(b) and lo <= a <= b):
+        raise ConfigError(f"{section}.{name}", value, f"a pair low <= high, low >= {lo}")
+    return (a, b)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SceneConfig:
+    """The greenhouse scene: the arm on a pedestal before a tomato row (robot base frame)."""
+
+    pedestal_height_m: float = field(
+        default=0.75,
+        metadata=_why("robot base above the floor: puts trusses at 0.0-0.45 m within reach", "m"),
+    )
+    row_x_m: float = field(default=0.50, metadata=_why("stem line of the plant row in front of the arm", "m"))
+    plants: int = field(default=5, metadata=_why("stems along the row, 0.4 m apart"))
+    leaves_per_plant: int = field(default=16, metadata=_why("leaflets per stem"))
+    target_x_m: tuple[float, float] = field(
+        default=(0.40, 0.45), metadata=_why("ripe target centre x: on the robot side of the row", "m")
+    )
+    target_y_m: tuple[float, float] = field(default=(-0.20, 0.20), metadata=_why("target centre y", "m"))
+    target_z_m: tuple[float, float] = field(default=(0.05, 0.40), metadata=_why("target centre z", "m"))
+    fruit_radius_m: tuple[float, float] = field(
+        default=(0.025, 0.045), metadata=_why("greenhouse tomato radii", "m")
+    )
+    distractors: int = field(default=4, metadata=_why("unripe green and orange fruit near the target"))
+    light_intensity: tuple[float, float] = field(
+        default=(0.55, 0.9), metadata=_why("diffuse intensity of the sun light, randomised")
+    )
+
+    def __post_init__(self) -> None:
+        _positive("scene", "pedestal_height_m", self.pedestal_height_m)
+        _positive("scene", "row_x_m", self.row_x_m)
+        _positive_int("scene", "plants", self.plants)
+        for name in ("leaves_per_plant", "distractors"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ConfigError(f"scene.{name}", v, "an integer >= 0")
+        for name in ("target_x_m", "target_y_m", "target_z_m"):
+            object.__setattr__(self, name, _range("scene", name, getattr(self, name)))
+        object.__setattr__(
+            self, "fruit_radius_m", _range("scene", "fruit_radius_m", self.fruit_radius_m, 1e-3)
+        )
+        object.__setattr__(
+            self, "light_intensity", _range("scene", "light_intensity", self.light_intensity, 0.0)
+        )
+        if self.target_x_m[1] >= self.row_x_m:
+            raise ConfigError("scene.target_x_m", self.target_x_m, f"values below row_x_m = {self.row_x_m}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SensorConfig:
+    """Sensor realism, seeded: off (ideal) by default, on in the ``realistic`` preset."""
+
+    image_noise_std: float = field(default=0.0, metadata=_why("Gaussian pixel noise, 8-bit levels"))
+    focal_error_rel: float = field(
+        default=0.0, metadata=_why("std of the relative error of the focal length the detector assumes")
+    )
+    principal_point_error_px: float = field(
+        default=0.0, metadata=_why("std of the principal-point error the detector assumes", "px")
+    )
+    encoder_noise_rad: float = field(default=0.0, metadata=_why("joint encoder noise std", "rad"))
+
+    def __post_init__(self) -> None:
+        for f in ("image_noise_std", "focal_error_rel", "principal_point_error_px", "encoder_noise_rad"):
+            _non_negative("sensor", f, getattr(self, f))
+
+    @classmethod
+    def realistic(cls) -> SensorConfig:
+        """OAK-1-like: 2 levels of noise, 1% focal and 2 px principal-point calibration error,
+        Dynamixel Pro encoder resolution (~0.0004 rad at 501,923 counts/turn) as noise."""
+        return cls(
+            image_noise_std=2.0, focal_error_rel=0.01, principal_point_error_px=2.0, encoder_noise_rad=4e-4
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class DetectorConfig:
+    """Colour segmentation and circle (cone) fit of the target tomato."""
+
+    red_hue_max: int = field(default=8, metadata=_why("ripe red: OpenCV hue <= this or >= red_hue_min_wrap"))
+    red_hue_min_wrap: int = field(default=170, metadata=_why("ripe red wraps around hue 180"))
+    min_saturation: int = field(default=110, metadata=_why("excludes pinkish highlights and grey", "0-255"))
+    min_value: int = field(default=40, metadata=_why("excludes deep shadow", "0-255"))
+    min_area_px: int = field(default=25, metadata=_why("smaller blobs are noise", "px"))
+    min_boundary_points: int = field(default=12, metadata=_why("fewest silhouette points for a fit"))
+    outlier_px: float = field(
+        default=1.5,
+        metadata=_why("boundary points this far inside the fitted circle are occluder edges", "px"),
+    )
+
+    def __post_init__(self) -> None:
+        for name in ("red_hue_max", "red_hue_min_wrap", "min_saturation", "min_value"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 255:
+                raise ConfigError(f"detector.{name}", v, "an integer in [0, 255]")
+        _positive_int("detector", "min_area_px", self.min_area_px)
+        _positive_int("detector", "min_boundary_points", self.min_boundary_points)
+        _positive("detector", "outlier_px", self.outlier_px)
+
+
 @dataclass(frozen=True, kw_only=True)
 class Settings:
     """Every setting of a synthetic (paper-protocol) run."""
@@ -409,6 +517,9 @@ class Settings:
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -460,6 +571,9 @@ _SECTIONS: dict[str, type] = {
     "planner": PlannerConfig,
     "protocol": ProtocolConfig,
     "robot": RobotConfig,
+    "scene": SceneConfig,
+    "sensor": SensorConfig,
+    "detector": DetectorConfig,
 }
 
 

@@ -17,6 +17,7 @@ __all__ = [
     "camera_rotation",
     "camera_rotation_derivative",
     "look_at_pose",
+    "pixel_rays",
     "project_point",
     "skew",
 ]
@@ -112,3 +113,17 @@ def project_point(p_camera: np.ndarray, focal_px: float, width_px: int, height_p
     u = 0.5 * width_px - focal_px * p[1] / p[0]
     v = 0.5 * height_px - focal_px * p[2] / p[0]
     return np.array([u, v])
+
+
+def pixel_rays(uv: np.ndarray, focal_px: float, width_px: int, height_px: int) -> np.ndarray:
+    """Unit rays in the paper's camera frame through image points (u, v), (N, 2) -> (N, 3).
+
+    The inverse of :func:`project_point`: u right, v down, principal point at the centre;
+    continuous pixel coordinates (pixel i spans [i, i + 1)).
+    """
+    uv = np.atleast_2d(np.asarray(uv, dtype=float))
+    rays = np.empty((uv.shape[0], 3))
+    rays[:, 0] = focal_px
+    rays[:, 1] = 0.5 * width_px - uv[:, 0]
+    rays[:, 2] = 0.5 * height_px - uv[:, 1]
+    return rays / np.linalg.norm(rays, axis=1, keepdims=True)

@@ -35,9 +35,8 @@ def main(out: str = "assets/sample_paths.png") -> None:
         title = f"{name} ({e.loss}), {measurement} measurement, {model} planning model"
         panels.append((title, result, scenario.p_world_fruit))
     c = Settings().constraints
-    print(
-        f"wrote {plot_sample_paths(panels, out, workspace=(np.array(c.workspace_centre_m), c.workspace_radius_m))}"
-    )
+    workspace = (np.array(c.workspace_centre_m), c.workspace_radius_m)
+    print(f"wrote {plot_sample_paths(panels, out, workspace=workspace)}")
 
 
 if __name__ == "__main__":

@@ -5,10 +5,14 @@ Two formulations (``RobotConfig.formulation``):
 - ``joint``: optimise the joint angles q. The camera position is FK(q); the loss and every
   task constraint act on it through the camera Jacobian; the optical axis must pass
   through the estimate (two equalities, y_C·d = z_C·d = 0, and x_C·d ≥ 0); joint limits are
-  bounds. Seeds: the current configuration and the IK of the kinematics-free BVE optimum.
+  bounds. Seeds: the current configuration and the best of the BVE's seed points mapped
+  into joint space by one pseudo-inverse step. When no seed reaches a feasible pose, an
+  elastic joint-space problem (min t s.t. g_i ≤ t, 1 - x_C·d ≤ t, step limit) turns the arm
+  towards one, a step at a time, flagged ``restoring``.
 - ``cartesian``: the kinematics-free BVE over the camera position with one more task
   constraint, :class:`Reachability`: the look-at IK residual at c (warm-started), with a
-  finite-difference gradient.
+  finite-difference gradient. Measured: ~1000x slower and rarely feasible (the residual is
+  not smooth at the edge of the reachable set); kept for comparison.
 
 Both return plans whose IK is verified: a plan flagged feasible has a configuration within
 the joint limits that puts the camera there looking at the estimate.

@@ -1,0 +1,161 @@
+"""Headless off-screen rendering of a MuJoCo camera (EGL, then OSMesa).
+
+The backend is chosen at run time, once per process: ``MUJOCO_GL`` if the user set it to
+``egl`` or ``osmesa``, else the first of EGL and OSMesa that can create a context (probed in
+a subprocess, because PyOpenGL cannot switch platforms once imported). Nothing happens at
+import: the choice is made when the first renderer is built.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import subprocess
+import sys
+from functools import cache
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from bve_mj.errors import BveError
+
+__all__ = ["OffscreenRenderer", "RenderError", "gl_backend"]
+
+_DEBIAN = "libegl1 and libgl1 (EGL), or libosmesa6 (OSMesa)"
+
+
+class RenderError(BveError):
+    """No headless OpenGL backend works on this machine."""
+
+
+def _probe(backend: str) -> bool:
+    code = f"from mujoco.{backend} import GLContext\nc = GLContext(16, 16); c.make_current(); c.free()\n"
+    env = {k: v for k, v in os.environ.items() if k != "PYOPENGL_PLATFORM"}
+    try:
+        res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return res.returncode == 0
+
+
+@cache
+def gl_backend() -> str:
+    """The headless OpenGL backend this process renders with: "egl" or "osmesa".
+
+    Raises:
+        RenderError: naming the Debian packages to install when neither works.
+    """
+    chosen = os.environ.get("MUJOCO_GL", "").lower().strip()
+    if chosen in ("egl", "osmesa"):
+        return chosen
+    for backend in ("egl", "osmesa"):
+        if _probe(backend):
+            return backend
+    raise RenderError(
+        f"no headless OpenGL backend works here (tried EGL and OSMesa); install {_DEBIAN}, "
+        "e.g. apt-get install libegl1 libgl1 libosmesa6"
+    )
+
+
+def _context(width: int, height: int) -> Any:
+    backend = gl_backend()
+    try:
+        if backend == "egl":
+            from mujoco.egl import GLContext
+        else:
+            from mujoco.osmesa import GLContext
+        ctx = GLContext(width, height)
+        ctx.make_current()
+    except Exception as exc:  # the probe passed but this process cannot: say which and why
+        raise RenderError(f"cannot create a {backend} context ({exc}); install {_DEBIAN}") from None
+    return ctx
+
+
+class OffscreenRenderer:
+    """Renders one of a model's cameras into RGB arrays (H, W, 3) uint8.
+
+    Args:
+        model: the compiled model (its ``visual.global_.offwidth/offheight`` must be at
+            least the requested size).
+        width, height: image size [px].
+        shadows: shadows cost about 10x per frame on a CPU renderer; off by default.
+        hidden_groups: geom groups not drawn (the arm's geoms are group 2).
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        width: int,
+        height: int,
+        *,
+        shadows: bool = False,
+        hidden_groups: tuple[int, ...] = (),
+    ) -> None:
+        if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
+            raise RenderError(
+                f"image {width}x{height} exceeds the model's offscreen buffer "
+                f"{model.vis.global_.offwidth}x{model.vis.global_.offheight}"
+            )
+        self._model = model
+        self._gl = _context(width, height)
+        self._ctx = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_100)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._ctx)
+        self._scene = mujoco.MjvScene(model, maxgeom=2000)
+        self._scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
+        self._scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = True
+        self._option = mujoco.MjvOption()
+        for g in hidden_groups:
+            self._option.geomgroup[g] = 0
+        self._camera = mujoco.MjvCamera()
+        self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        self._viewport = mujoco.MjrRect(0, 0, width, height)
+        self._rgb = np.empty((height, width, 3), dtype=np.uint8)
+        self.width, self.height = width, height
+
+    def render(self, data: mujoco.MjData, camera: str | int) -> np.ndarray:
+        """The image of ``camera`` (name or id) for the current ``data`` (kinematics done)."""
+        cam_id = camera if isinstance(camera, int) else self._model.camera(camera).id
+        self._camera.fixedcamid = cam_id
+        self._gl.make_current()
+        mujoco.mjv_updateScene(
+            self._model, data, self._option, None, self._camera, mujoco.mjtCatBit.mjCAT_ALL, self._scene
+        )
+        mujoco.mjr_render(self._viewport, self._scene, self._ctx)
+        mujoco.mjr_readPixels(self._rgb, None, self._viewport, self._ctx)
+        return np.flipud(self._rgb).copy()
+
+    def render_free(self, data: mujoco.MjData, lookat: np.ndarray, distance: float,
+                    azimuth: float, elevation: float) -> np.ndarray:  # fmt: skip
+        """An outside view from a free camera (degrees for the angles)."""
+        cam = mujoco.MjvCamera()
+        cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+        cam.lookat[:] = lookat
+        cam.distance, cam.azimuth, cam.elevation = distance, azimuth, elevation
+        self._gl.make_current()
+        mujoco.mjv_updateScene(
+            self._model, data, self._option, None, cam, mujoco.mjtCatBit.mjCAT_ALL, self._scene
+        )
+        mujoco.mjr_render(self._viewport, self._scene, self._ctx)
+        mujoco.mjr_readPixels(self._rgb, None, self._viewport, self._ctx)
+        return np.flipud(self._rgb).copy()
+
+    def close(self) -> None:
+        """Free the GL resources (also done when the renderer is garbage-collected).
+
+        The MjrContext is freed with its own GL context current: freeing it while another
+        renderer's context is current would delete that renderer's textures and buffers.
+        """
+        gl = getattr(self, "_gl", None)
+        if gl is None:
+            return
+        gl.make_current()
+        if getattr(self, "_ctx", None) is not None:
+            self._ctx.free()
+            self._ctx = None
+        gl.free()
+        self._gl = None
+
+    def __del__(self) -> None:  # pragma: no cover - best effort
+        with contextlib.suppress(Exception):
+            self.close()

@@ -1,0 +1,151 @@
+"""The arms: Pinocchio/MuJoCo agreement, Jacobians, look-at IK, the MJCF, the reach."""
+
+import math
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.optimize import minimize
+
+from bve_mj.errors import ConfigError
+from bve_mj.robot import ROBOTS, ArmKinematics, get_robot, look_at_ik
+from bve_mj.sim.arm import compile_arm
+from tests.conftest import finite_difference
+
+LIMITS = {"manipulator_h": "emanual", "ur5": "urdf", "panda": "urdf"}
+
+
+@pytest.fixture(scope="module", params=list(ROBOTS))
+def arm(request):
+    name = request.param
+    kin = ArmKinematics(get_robot(name), LIMITS[name])
+    return kin, compile_arm(kin)
+
+
+def test_pinocchio_and_mujoco_agree_on_the_camera_pose(arm):
+    kin, am = arm
+    data = mujoco.MjData(am.model)
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        q = kin.random_configuration(rng)
+        data.qpos[am.qpos_adr] = q
+        mujoco.mj_kinematics(am.model, data)
+        mujoco.mj_camlight(am.model, data)
+        p, R = kin.camera_pose(q)
+        np.testing.assert_allclose(data.site_xpos[am.camera_site_id], p, atol=1e-6)
+        np.testing.assert_allclose(data.site_xmat[am.camera_site_id].reshape(3, 3), R, atol=1e-6)
+        # the MuJoCo camera looks along the optical axis (its -z), with up = camera z
+        cam = data.cam_xmat[am.camera_id].reshape(3, 3)
+        np.testing.assert_allclose(-cam[:, 2], R[:, 0], atol=1e-6)
+        np.testing.assert_allclose(cam[:, 1], R[:, 2], atol=1e-6)
+
+
+def test_camera_jacobian_matches_finite_differences(arm):
+    kin, _ = arm
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        q = kin.random_configuration(rng)
+        _, R, J = kin.camera_pose_and_jacobian(q)
+        Jv = finite_difference(lambda x: kin.camera_pose(x)[0], q)
+        np.testing.assert_allclose(J[:3], Jv, atol=1e-6)
+        # angular part: dR/dq_i = [ω_i]× R
+        for i in range(kin.nq):
+            dR = finite_difference(
+                lambda t, i=i, q=q: kin.camera_pose(q + t[0] * np.eye(kin.nq)[i])[1], np.zeros(1)
+            )
+            w = J[3:, i]
+            skew_w = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+            np.testing.assert_allclose(dR[..., 0], skew_w @ R, atol=1e-6)
+
+
+def test_look_at_ik_round_trip(arm):
+    kin, _ = arm
+    rng = np.random.default_rng(2)
+    ok = 0
+    n = 200
+    for _ in range(n):
+        q = kin.random_configuration(rng)
+        p, R = kin.camera_pose(q)
+        target = p + R[:, 0] * rng.uniform(0.2, 1.0)
+        res = look_at_ik(kin, p, target, kin.home, rng)
+        assert kin.within_limits(res.q)
+        if res.success:
+            ok += 1
+            p2, R2 = kin.camera_pose(res.q)
+            assert np.linalg.norm(p2 - p) <= 1e-4
+            d = (target - p) / np.linalg.norm(target - p)
+            assert math.acos(min(1.0, R2[:, 0] @ d)) <= 1e-3
+    assert ok >= 0.99 * n
+
+
+def test_ik_reports_failure_for_unreachable_targets():
+    kin = ArmKinematics(get_robot("manipulator_h"), "emanual")
+    res = look_at_ik(kin, np.array([2.0, 0.0, 0.5]), np.array([3.0, 0.0, 0.5]), kin.home)
+    assert not res.success and res.position_error_m > 1.0
+    assert kin.within_limits(res.q)
+
+
+def test_arm_steps_one_second_from_home_without_warnings(arm):
+    kin, am = arm
+    data = mujoco.MjData(am.model)
+    mujoco.mj_resetDataKeyframe(am.model, data, am.model.key("home").id)
+    np.testing.assert_allclose(data.qpos[am.qpos_adr], kin.home)
+    for _ in range(round(1.0 / am.model.opt.timestep)):
+        mujoco.mj_step(am.model, data)
+    assert sum(w.number for w in data.warning) == 0
+    assert np.all(np.isfinite(data.qpos))
+    assert np.abs(data.qpos[am.qpos_adr] - kin.home).max() < 0.05  # servos hold home
+
+
+def test_actuators_carry_the_servo_limits():
+    kin = ArmKinematics(get_robot("manipulator_h"), "emanual")
+    m = compile_arm(kin).model
+    np.testing.assert_allclose(m.actuator_forcerange[:, 1], [44.7, 44.7, 25.3, 25.3, 5.1, 5.1])
+    np.testing.assert_allclose(m.jnt_range[:, 0], kin.limits.lower)
+    np.testing.assert_allclose(m.jnt_range[:, 1], kin.limits.upper)
+    # link1 (0.85644 kg) is static and fused into the world; the moving links weigh the rest
+    moving = 0.94658 + 1.30260 + 1.15977 + 0.44688 + 0.43273 + 0.01919
+    assert m.body_mass.sum() == pytest.approx(moving, abs=1e-9)
+
+
+@pytest.mark.parametrize("limit_set", ["urdf", "emanual"])
+def test_manipulator_h_reach(limit_set):
+    """The farthest end_link point from (0, 0, 0.159) m over the limits is 0.648 m."""
+    kin = ArmKinematics(get_robot("manipulator_h"), limit_set)
+    fid = kin.model.getFrameId("end_link")
+    centre = np.array([0.0, 0.0, 0.159])
+
+    def neg_distance(q):
+        pin.framesForwardKinematics(kin.model, kin.data, q)
+        return -float(np.linalg.norm(kin.data.oMf[fid].translation - centre))
+
+    rng = np.random.default_rng(3)
+    bounds = list(zip(kin.limits.lower, kin.limits.upper, strict=True))
+    best = max(
+        -minimize(neg_distance, kin.random_configuration(rng), method="L-BFGS-B", bounds=bounds).fun
+        for _ in range(30)
+    )
+    assert best == pytest.approx(0.648, abs=0.002)
+
+
+def test_zero_pose_matches_the_published_joint_origins():
+    kin = ArmKinematics(get_robot("manipulator_h"), "urdf")
+    pin.framesForwardKinematics(kin.model, kin.data, np.zeros(6))
+    expected = {
+        "joint1": (0, 0, 0.126),
+        "joint2": (0, 0.069, 0.159),
+        "joint3": (0.03, 0.0575, 0.423),
+        "joint4": (0.225, 0, 0.453),
+        "joint5": (0.288, 0.045, 0.453),
+        "joint6": (0.411, 0, 0.453),
+    }
+    for name, xyz in expected.items():
+        np.testing.assert_allclose(kin.data.oMi[kin.model.getJointId(name)].translation, xyz, atol=1e-9)
+
+
+def test_bad_robot_settings_are_named():
+    with pytest.raises(ConfigError, match=r"robot\.name"):
+        get_robot("kuka")
+    with pytest.raises(ConfigError, match=r"robot\.joint_limits"):
+        ArmKinematics(get_robot("ur5"), "emanual")
