@@ -103,6 +103,16 @@ def _fit_cone(rays: np.ndarray) -> tuple[np.ndarray, float]:
     return w / n, 1.0 / n  # axis, cos α
 
 
+def _trim_corners(keep: np.ndarray, margin: int) -> np.ndarray:
+    """Also drop ``margin`` contour neighbours on each side of every trimmed run: where the
+    silhouette meets an occluder, the last few points are blended with it."""
+    cut = ~keep
+    if not cut.any() or cut.all():
+        return keep
+    padded = np.concatenate([cut[-margin:], cut, cut[:margin]]).astype(int)
+    return ~(np.convolve(padded, np.ones(2 * margin + 1, dtype=int), mode="valid") > 0)
+
+
 def _check_image(image: object) -> str | None:
     if not isinstance(image, np.ndarray):
         return f"image is a {type(image).__name__}, not a numpy array"
@@ -157,7 +167,8 @@ def detect(
     uv = pts + 0.5  # pixel centres
     centre = uv.mean(axis=0)
     keep = np.ones(len(uv), dtype=bool)
-    for _ in range(4):
+    threshold = cfg.outlier_px
+    for _ in range(8):
         # the silhouette runs half a pixel outside the centres of the boundary pixels
         d = uv - centre
         edge = uv + 0.5 * d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
@@ -166,11 +177,16 @@ def detect(
         if not (0.0 < cos_a < 1.0) or axis[0] <= 0.0:
             return NoDetection("silhouette fit failed (degenerate boundary)")
         centre = intrinsics.project(axis)
-        # residual in pixels: positive = inside the cone (occluder edges, calyx)
+        # residual in pixels: positive = inside the cone (occluder edges, calyx); only
+        # inside points can be occlusion, so only they are trimmed, against a threshold
+        # that tightens to 3 robust σ of the points kept (never below 0.5 px)
         alpha = math.acos(cos_a)
         ang = np.arccos(np.clip(rays @ axis, -1.0, 1.0))
         resid_px = (alpha - ang) * intrinsics.focal_px
-        new_keep = resid_px < cfg.outlier_px
+        kept = resid_px[keep]
+        sigma = 1.4826 * float(np.median(np.abs(kept - np.median(kept))))
+        threshold = min(threshold, max(0.5, 3.0 * sigma)) if keep.sum() < len(keep) else threshold
+        new_keep = _trim_corners(resid_px < threshold, margin=3)
         if new_keep.sum() < cfg.min_boundary_points or np.array_equal(new_keep, keep):
             break
         keep = new_keep

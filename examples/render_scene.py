@@ -1,0 +1,65 @@
+"""Render the greenhouse: the eye-in-hand view with the detection drawn on it, and an
+outside view of the arm before the plant row.
+
+    python examples/render_scene.py [seed] [out_dir]
+
+Writes out_dir/greenhouse.png (default: assets/): outside view | eye-in-hand view.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import cv2
+import mujoco
+import numpy as np
+
+from bve_mj.config import Settings
+from bve_mj.perception import Detection, Intrinsics, detect
+from bve_mj.robot import ArmKinematics, get_robot, look_at_ik
+from bve_mj.sim.arm import CAMERA_NAME
+from bve_mj.sim.render import OffscreenRenderer
+from bve_mj.sim.scene import build_scene
+
+
+def main(seed: int = 4, out_dir: str = "assets") -> None:
+    s = Settings()
+    kin = ArmKinematics(get_robot(s.robot.name), s.robot.joint_limits)
+    spec, info = build_scene(kin, s.scene, np.random.default_rng(seed), s.camera)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    k = info.target.centre_m
+    rng = np.random.default_rng(seed)
+    ik = look_at_ik(kin, k + np.array([-0.32, 0.06, 0.08]), k + np.array([0.0, -0.02, 0.03]), kin.home, rng)
+    adr = [model.jnt_qposadr[model.joint(n).id] for n in kin.joint_names]
+    data.qpos[adr] = ik.q
+    mujoco.mj_forward(model, data)
+    renderer = OffscreenRenderer(model, s.camera.width_px, s.camera.height_px)
+    eye = renderer.render(data, CAMERA_NAME)
+    intr = Intrinsics.from_camera(s.camera)
+    p, R = kin.camera_pose(ik.q)
+    predicted = intr.project(R.T @ (k - p))
+    det = detect(eye, intr, s.fruit, s.measurement, s.detector, predicted)
+    shown = cv2.cvtColor(eye, cv2.COLOR_RGB2BGR)
+    if isinstance(det, Detection):
+        c = tuple(int(x) for x in np.rint(det.centre_px).astype(int))
+        cv2.circle(shown, c, int(np.rint(det.radius_px)), (255, 255, 0), 2, cv2.LINE_AA)
+        cv2.drawMarker(shown, c, (255, 255, 0), cv2.MARKER_CROSS, 14, 2)
+        lines = [
+            f"range {det.range_m:.3f} m, true {np.linalg.norm(k - p):.3f} m",
+            f"(assumed r {1e3 * s.fruit.radius_m:.0f} mm, true {1e3 * info.target.radius_m:.1f} mm)",
+        ]
+        for i, line in enumerate(lines):
+            cv2.putText(shown, line, (12, 28 + 28 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2,
+                        cv2.LINE_AA)  # fmt: skip
+    out = Path(out_dir)
+    outside = cv2.cvtColor(
+        renderer.render_free(data, np.array([0.3, 0.0, 0.15]), 1.9, 25, -20), cv2.COLOR_RGB2BGR
+    )
+    cv2.imwrite(str(out / "greenhouse.png"), np.hstack([outside, shown]))
+    print(f"wrote {out / 'greenhouse.png'} (outside view | eye-in-hand view); detection: {det}")
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 4, *(sys.argv[2:3]))
