@@ -61,6 +61,26 @@ def _build_parser() -> argparse.ArgumentParser:
     paper.add_argument("--workers", default=None, help="processes (default: all cores)")
     paper.add_argument("--json", default=None, help="write settings and metrics to this JSON file")
     paper.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+    ep = sub.add_parser(
+        "episode",
+        help="one closed-loop MuJoCo episode: detect, fuse, plan, IK, drive",
+        description="Run one seeded episode in the rendered greenhouse and report it.",
+    )
+    ep.add_argument("--config", default=None, help="scenario TOML (sections of bve_mj.config.Settings)")
+    ep.add_argument("--experiment", default=None, help="constraint set and loss, E1..E10 (default E5)")
+    ep.add_argument("--seed", default="0", help="scene, prior and sensor seed (default 0)")
+    ep.add_argument("--views", default=None, help="most planned views (default 15)")
+    ep.add_argument("--measurement", default="camera", help="camera (default) or range")
+    ep.add_argument("--planner", default=None, help="bve, random or circle")
+    ep.add_argument("--planning-model", default=None, help="paper or consistent")
+    ep.add_argument("--robot", default=None, help="manipulator_h, ur5 or panda")
+    ep.add_argument("--approach", action="store_true", help="approach mode: end close to the fruit")
+    ep.add_argument("--realistic", action="store_true", help="sensor realism on (noise, calibration error)")
+    ep.add_argument("--video", default=None, help="write an mp4 of the approach path here")
+    ep.add_argument("--plots", default=None, help="write PREFIX_path.png and PREFIX_error.png")
+    ep.add_argument("--json", default=None, help="write the episode log (settings, views, outcome) here")
+    ep.add_argument("--quiet", action="store_true", help="print only the summary")
     return parser
 
 
@@ -244,6 +264,98 @@ def _cmd_paper(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_episode(args: argparse.Namespace) -> int:
+    from bve_mj.config import RobotConfig, SensorConfig, Settings, load_settings
+    from bve_mj.errors import ConfigError
+    from bve_mj.experiments import with_overrides
+
+    seed = _int_arg("seed", args.seed, 0) or 0
+    views = _int_arg("views", args.views, 1)
+    json_path = _check_output_path("json", args.json)
+    video_path = _check_output_path("video", args.video)
+    if video_path is not None and video_path.suffix.lower() != ".mp4":
+        raise ConfigError("video", args.video, "a path ending in .mp4")
+    plots_prefix = _check_output_path("plots", args.plots)
+    if plots_prefix is not None:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise ConfigError(
+                "plots", args.plots, "matplotlib installed: pip install 'bve_mj[plots]'"
+            ) from None
+    settings = load_settings(args.config) if args.config else Settings()
+    episode = {k: v for k, v in (("experiment", args.experiment), ("views", views)) if v is not None}
+    if args.approach:
+        episode["approach"] = True
+    planner = {
+        k: v for k, v in (("kind", args.planner), ("planning_model", args.planning_model)) if v is not None
+    }
+    settings = with_overrides(
+        settings, episode=episode, planner=planner, measurement={"kind": args.measurement}
+    )
+    if args.robot:
+        limits = settings.robot.joint_limits if args.robot == "manipulator_h" else "urdf"
+        settings = dataclasses.replace(
+            settings,
+            robot=RobotConfig(name=args.robot, joint_limits=limits, formulation=settings.robot.formulation),
+        )
+    if args.realistic:
+        settings = dataclasses.replace(settings, sensor=SensorConfig.realistic())
+
+    import numpy as np
+
+    from bve_mj.mujoco_episode import run_mujoco_episode
+    from bve_mj.video import EpisodeRecorder
+
+    recorder = EpisodeRecorder(video_path) if video_path is not None else None
+    try:
+        result = run_mujoco_episode(settings, seed, recorder=recorder)
+    finally:
+        frames = recorder.close() if recorder is not None else 0
+    doc = result.to_json()
+    e = result.settings.episode
+    print(
+        f"bve-mj episode: seed {seed}, {e.experiment} ({'approach' if e.approach else 'localise'}), "
+        f"measurement={result.settings.measurement.kind}, planner={result.settings.planner.kind}, "
+        f"robot={result.settings.robot.name}; target r = {1e3 * result.info.target.radius_m:.1f} mm"
+    )
+    if not args.quiet:
+        print(
+            f"{'view':>4} {'plan':>13} {'detection':>26} {'error mm':>9} {'σmax mm':>8} {'cam-fruit m':>11}"
+        )
+        for v, rec in zip(doc["views"], result.result.views, strict=True):
+            det = v.get("detection", {})
+            shown = f"r {det['radius_px']:.1f} px" if "radius_px" in det else str(det.get("none", "-"))[:26]
+            sig = 1e3 * float(np.sqrt(np.linalg.eigvalsh(rec.belief.cov)[-1]))
+            dist = float(np.linalg.norm(rec.p_world_camera - result.truth))
+            print(
+                f"{v['view']:>4} {v['plan_status'] or 'start'!s:>13} {shown:>26} {v['error_mm']:9.2f} "
+                f"{sig:8.2f} {dist:11.3f}"
+            )
+    t = [vv.get("timings_s", {}) for vv in doc["views"][1:]]
+    plan = [vv["plan_s"] for vv in doc["views"][1:]]
+    stage = {k: 1e3 * float(np.median([x.get(k, 0.0) for x in t])) if t else 0.0
+             for k in ("ik_s", "control_s", "render_s", "detect_s")}  # fmt: skip
+    print(
+        f"outcome: {doc['outcome']}; final error {doc['final_error_mm']:.2f} mm "
+        f"(NEES {doc['final_nees']:.2f}) after {len(doc['views'])} views; wall {doc['wall_s']:.2f} s; "
+        f"median per view: plan {1e3 * float(np.median(plan)) if plan else 0.0:.1f} ms, "
+        f"IK {stage['ik_s']:.1f} ms, control {stage['control_s']:.1f} ms, "
+        f"render {stage['render_s']:.1f} ms, detect {stage['detect_s']:.1f} ms"
+    )
+    if video_path is not None:
+        print(f"wrote {video_path} ({frames} frames)")
+    if plots_prefix is not None:
+        from bve_mj.plots import plot_episode
+
+        for p in plot_episode(doc, plots_prefix):
+            print(f"wrote {p}")
+    if json_path is not None:
+        write_json_atomic(json_path, doc)
+        print(f"wrote {json_path}")
+    return EXIT_OK
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``bve-mj``; returns the exit status."""
     from bve_mj.errors import BveError, ConfigError
@@ -256,6 +368,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return EXIT_USAGE
         if args.command == "paper":
             return _cmd_paper(args)
+        if args.command == "episode":
+            return _cmd_episode(args)
         raise _UsageError(f"bve-mj: unknown command {args.command!r}")  # pragma: no cover
     except _UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)

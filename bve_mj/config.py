@@ -32,6 +32,7 @@ __all__ = [
     "CameraConfig",
     "ConstraintConfig",
     "DetectorConfig",
+    "EpisodeConfig",
     "FilterConfig",
     "FruitPrior",
     "LossName",
@@ -506,6 +507,57 @@ class DetectorConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
+class EpisodeConfig:
+    """A closed-loop MuJoCo episode: constraints adapted to the arm, stopping rules, approach."""
+
+    experiment: str = field(default="E5", metadata=_why("constraint set and loss (E5: all of the paper's)"))
+    views: int = field(default=15, metadata=_why("most planned views after the first"))
+    band_distance_m: float = field(
+        default=0.30,
+        metadata=_why("distance band centre adapted to the arm: 0.645 m reach, fruit at ~0.45 m", "m"),
+    )
+    band_tolerance_m: float = field(default=0.08, metadata=_why("distance band half-width", "m"))
+    step_m: float = field(default=0.10, metadata=_why("step limit: ~20 deg of view change at 0.3 m", "m"))
+    initial_error_m: float = field(
+        default=0.05, metadata=_why("prior mean = fruit + U[-e, e]^3 (a coarse first detection)", "m")
+    )
+    stop_sigma_m: float = field(
+        default=0.0015, metadata=_why("stop when the largest posterior std falls below this", "m")
+    )
+    stop_stable_m: float = field(
+        default=0.0003, metadata=_why("stop when the estimate moves less than this ...", "m")
+    )
+    stable_views: int = field(default=3, metadata=_why("... over this many views"))
+    approach: bool = field(default=False, metadata=_why("approach mode: eq. 13 term on, no band"))
+    approach_distance_m: float = field(
+        default=0.10, metadata=_why("approach ends with the camera this close to the estimate", "m")
+    )
+    approach_wall_distance_m: float = field(
+        default=0.04,
+        metadata=_why(
+            "approach mode's plant wall, in front of the fruit centre: the paper's 0.1 m would keep "
+            "the camera at >= 0.1 m; the row itself stands behind the fruit",
+            "m",
+        ),
+    )
+
+    def __post_init__(self) -> None:
+        _positive_int("episode", "views", self.views)
+        _positive_int("episode", "stable_views", self.stable_views)
+        for f in ("band_distance_m", "band_tolerance_m", "step_m", "stop_sigma_m", "approach_distance_m"):
+            _positive("episode", f, getattr(self, f))
+        _non_negative("episode", "initial_error_m", self.initial_error_m)
+        _non_negative("episode", "stop_stable_m", self.stop_stable_m)
+        _non_negative("episode", "approach_wall_distance_m", self.approach_wall_distance_m)
+        if self.band_tolerance_m >= self.band_distance_m:
+            raise ConfigError("episode.band_tolerance_m", self.band_tolerance_m, "a number < band_distance_m")
+        if not isinstance(self.approach, bool):
+            raise ConfigError("episode.approach", self.approach, "true or false")
+        if self.experiment.upper() not in {f"E{i}" for i in range(1, 11)}:
+            raise ConfigError("episode.experiment", self.experiment, "one of E1..E10")
+
+
+@dataclass(frozen=True, kw_only=True)
 class Settings:
     """Every setting of a synthetic (paper-protocol) run."""
 
@@ -520,6 +572,7 @@ class Settings:
     scene: SceneConfig = field(default_factory=SceneConfig)
     sensor: SensorConfig = field(default_factory=SensorConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
+    episode: EpisodeConfig = field(default_factory=EpisodeConfig)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -574,6 +627,7 @@ _SECTIONS: dict[str, type] = {
     "scene": SceneConfig,
     "sensor": SensorConfig,
     "detector": DetectorConfig,
+    "episode": EpisodeConfig,
 }
 
 

@@ -10,7 +10,7 @@ import numpy as np
 from bve_mj.episode import EpisodeResult
 from bve_mj.errors import ConfigError
 
-__all__ = ["plot_sample_paths"]
+__all__ = ["plot_episode", "plot_sample_paths"]
 
 
 def _pyplot():  # type: ignore[no-untyped-def]
@@ -79,3 +79,52 @@ def plot_sample_paths(
     fig.savefig(out)
     plt.close(fig)
     return out
+
+
+def plot_episode(doc: dict[str, object], prefix: str | Path) -> tuple[Path, Path]:
+    """From an episode's JSON document: ``PREFIX_path.png`` (camera path, truth, estimates)
+    and ``PREFIX_error.png`` (error and largest σ against view number)."""
+    plt = _pyplot()
+    views = doc["views"]
+    assert isinstance(views, list)
+    cams = np.array([v["camera_position_m"] for v in views if "camera_position_m" in v])
+    est = np.array([v["estimate_m"] for v in views])
+    truth = np.array(views[0]["truth_m"])
+    err = np.array([v["error_mm"] for v in views])
+    sig = np.array([1e3 * np.sqrt(np.linalg.eigvalsh(np.array(v["covariance_m2"]))[-1]) for v in views])
+    prefix = Path(prefix)
+    path_png = prefix.with_name(prefix.name + "_path.png")
+    err_png = prefix.with_name(prefix.name + "_error.png")
+
+    fig = plt.figure(figsize=(6, 5), dpi=110)
+    ax = fig.add_subplot(projection="3d")
+    if len(cams):
+        ax.plot(*cams.T, "-o", color="#4aa3df", ms=3, label="camera")
+    ax.plot(*est.T, "-", color="#2ca02c", label="estimate")
+    ax.scatter(*truth, color="#d62728", marker="*", s=80, label="true fruit")
+    pts = np.vstack([cams, est, truth[None]]) if len(cams) else np.vstack([est, truth[None]])
+    mid, half = pts.mean(axis=0), max(float(np.ptp(pts, axis=0).max()) / 2, 0.05)
+    for setlim, m in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid, strict=True):
+        setlim(m - half, m + half)
+    ax.set_box_aspect((1, 1, 1))
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_zlabel("z [m]")
+    ax.legend(fontsize=8)
+    ax.set_title(f"outcome {doc['outcome']}, final error {doc['final_error_mm']:.1f} mm", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path_png)
+    plt.close(fig)
+
+    fig, ax2 = plt.subplots(figsize=(6, 3.5), dpi=110)
+    n = np.arange(len(views))
+    ax2.semilogy(n, err, "-o", label="error ‖estimate - truth‖")
+    ax2.semilogy(n, sig, "--", label="largest posterior σ")
+    ax2.set_xlabel("view")
+    ax2.set_ylabel("mm")
+    ax2.grid(True, which="both", alpha=0.3)
+    ax2.legend()
+    fig.tight_layout()
+    fig.savefig(err_png)
+    plt.close(fig)
+    return path_png, err_png

@@ -129,6 +129,11 @@ def arm_spec(kin: ArmKinematics, camera: CameraConfig | None = None) -> mujoco.M
         g.classname = visual
         g.contype, g.conaffinity, g.group = 0, 0, 2
 
+    # gravity compensation on the arm's bodies stands in for the servos' integral action
+    for b in spec.bodies:
+        if b.name != "world":
+            b.gravcomp = 1.0
+
     # the camera on the body of its parent joint, at the Pinocchio frame placement
     frame = kin.model.frames[kin.camera_frame_id]
     parent_joint = kin.model.names[frame.parentJoint]

@@ -12,15 +12,17 @@ import contextlib
 import os
 import subprocess
 import sys
+from collections.abc import Callable
 from functools import cache
 from typing import Any
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from bve_mj.errors import BveError
 
-__all__ = ["OffscreenRenderer", "RenderError", "gl_backend"]
+__all__ = ["OffscreenRenderer", "RenderError", "add_marker", "gl_backend"]
 
 _DEBIAN = "libegl1 and libgl1 (EGL), or libosmesa6 (OSMesa)"
 
@@ -125,9 +127,17 @@ class OffscreenRenderer:
         mujoco.mjr_readPixels(self._rgb, None, self._viewport, self._ctx)
         return np.flipud(self._rgb).copy()
 
-    def render_free(self, data: mujoco.MjData, lookat: np.ndarray, distance: float,
-                    azimuth: float, elevation: float) -> np.ndarray:  # fmt: skip
-        """An outside view from a free camera (degrees for the angles)."""
+    def render_free(
+        self,
+        data: mujoco.MjData,
+        lookat: np.ndarray,
+        distance: float,
+        azimuth: float,
+        elevation: float,
+        decorate: Callable[[mujoco.MjvScene], None] | None = None,
+    ) -> np.ndarray:
+        """An outside view from a free camera (degrees for the angles); ``decorate(scene)``
+        may add marker geoms (see :func:`add_marker`) before drawing."""
         cam = mujoco.MjvCamera()
         cam.type = mujoco.mjtCamera.mjCAMERA_FREE
         cam.lookat[:] = lookat
@@ -136,6 +146,8 @@ class OffscreenRenderer:
         mujoco.mjv_updateScene(
             self._model, data, self._option, None, cam, mujoco.mjtCatBit.mjCAT_ALL, self._scene
         )
+        if decorate is not None:
+            decorate(self._scene)
         mujoco.mjr_render(self._viewport, self._scene, self._ctx)
         mujoco.mjr_readPixels(self._rgb, None, self._viewport, self._ctx)
         return np.flipud(self._rgb).copy()
@@ -159,3 +171,25 @@ class OffscreenRenderer:
     def __del__(self) -> None:  # pragma: no cover - best effort
         with contextlib.suppress(Exception):
             self.close()
+
+
+def add_marker(
+    scene: mujoco.MjvScene,
+    geom_type: mujoco.mjtGeom,
+    size: ArrayLike,
+    pos: ArrayLike,
+    mat: ArrayLike,
+    rgba: ArrayLike,
+) -> None:
+    """Append a decorative geom (not in the model) to a scene about to be drawn."""
+    if scene.ngeom >= scene.maxgeom:
+        return
+    mujoco.mjv_initGeom(
+        scene.geoms[scene.ngeom],
+        geom_type,
+        np.asarray(size, dtype=float),
+        np.asarray(pos, dtype=float),
+        np.asarray(mat, dtype=float).reshape(9),
+        np.asarray(rgba, dtype=np.float32),
+    )
+    scene.ngeom += 1

@@ -1,0 +1,189 @@
+"""The rendered world: plan → IK → drive → render → detect → measurement.
+
+The filter is given the camera pose the arm actually reached, as its joint encoders report
+it, through forward kinematics; never the planned pose.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from bve_mj.config import Settings
+from bve_mj.estimation.models import CameraModel, RangeModel
+from bve_mj.perception.detector import Detection, NoDetection, detect
+from bve_mj.planning.plan import ViewPlan
+from bve_mj.robot.ik import look_at_ik
+from bve_mj.robot.kinematics import ArmKinematics
+from bve_mj.sim.arm import CAMERA_NAME
+from bve_mj.sim.controller import JointTrajectoryController, MoveReport
+from bve_mj.sim.render import OffscreenRenderer
+from bve_mj.sim.scene import SceneInfo
+from bve_mj.sim.sensors import calibrated_intrinsics, noisy_encoders, noisy_image
+from bve_mj.sim.world import Observation
+
+__all__ = ["MujocoWorld", "ViewTimings"]
+
+
+@dataclass
+class ViewTimings:
+    """Wall time of one view's stages [s] (planning is timed by the episode loop)."""
+
+    ik_s: float = 0.0
+    control_s: float = 0.0
+    render_s: float = 0.0
+    detect_s: float = 0.0
+
+
+@dataclass
+class _Last:
+    move: MoveReport | None = None
+    ik_failed: bool = False
+    detection: Detection | NoDetection | None = None
+    q: np.ndarray | None = None
+    q_encoders: np.ndarray | None = None
+    image: np.ndarray | None = None
+    timings: ViewTimings = field(default_factory=ViewTimings)
+
+
+class MujocoWorld:
+    """The arm in the greenhouse scene, seen through its eye-in-hand camera.
+
+    Args:
+        settings: every setting (camera, sensor, detector, measurement, fruit prior).
+        kin: the arm's kinematics (the same URDF the scene's arm was compiled from).
+        model: the compiled scene; info: its ground truth.
+        q_start: the joint configuration the arm starts in.
+        target: the point the camera looks at first (the prior's mean).
+        rng: seeds the sensor noise and the calibration error.
+        keep_images: keep the last eye-in-hand image (for videos).
+        on_step: called with the simulation time after every physics step of a move.
+    """
+
+    def __init__(
+        self,
+        settings: Settings,
+        kin: ArmKinematics,
+        model: mujoco.MjModel,
+        info: SceneInfo,
+        q_start: np.ndarray,
+        target: np.ndarray,
+        rng: np.random.Generator,
+        *,
+        keep_images: bool = False,
+        on_step: Callable[[float], None] | None = None,
+    ) -> None:
+        self.settings, self.kin, self.model, self.info = settings, kin, model, info
+        self.data = mujoco.MjData(model)
+        joints = [model.joint(n).id for n in kin.joint_names]
+        self.qpos_adr = np.array([model.jnt_qposadr[j] for j in joints])
+        dof_adr = np.array([model.jnt_dofadr[j] for j in joints])
+        by_joint = {int(model.actuator_trnid[a, 0]): a for a in range(model.nu)}
+        ctrl_ids = np.array([by_joint[j] for j in joints])
+        self.controller = JointTrajectoryController(self.model, self.data, self.qpos_adr, dof_adr, ctrl_ids)
+        self.data.qpos[self.qpos_adr] = q_start
+        self.controller.hold(q_start)
+        mujoco.mj_forward(model, self.data)
+        cam = settings.camera
+        self.renderer = OffscreenRenderer(model, cam.width_px, cam.height_px)
+        self._rng = rng
+        self.intrinsics = calibrated_intrinsics(cam, settings.sensor, rng)
+        self._target = np.asarray(target, dtype=float).copy()
+        self._keep_images = keep_images
+        self._on_step = on_step
+        self.last = _Last()
+
+    # ------------------------------------------------------------------ state
+    @property
+    def q(self) -> np.ndarray:
+        """True joint angles [rad] (for logs and checks; the filter never sees them)."""
+        return self.data.qpos[self.qpos_adr].copy()
+
+    @property
+    def p_world_fruit(self) -> np.ndarray:
+        return self.info.target.centre_m.copy()
+
+    def _measured_pose(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        q_enc = noisy_encoders(self.q, self.settings.sensor, self._rng)
+        p, R = self.kin.camera_pose(q_enc)
+        return q_enc, p, R
+
+    @property
+    def p_world_camera(self) -> np.ndarray:
+        """The camera position as the encoders (at the last view) and FK report it."""
+        q = self.last.q_encoders if self.last.q_encoders is not None else self.q
+        return self.kin.camera_pose(q)[0]
+
+    # ------------------------------------------------------------------ World
+    def move_camera(self, plan: ViewPlan) -> None:
+        self.last = _Last()
+        t0 = time.perf_counter()
+        q_target = plan.q
+        if q_target is None:
+            ik = look_at_ik(self.kin, plan.p_world_camera, plan.p_world_target, self.q, self._rng)
+            q_target = ik.q if ik.success else None
+            self.last.ik_failed = not ik.success
+        t1 = time.perf_counter()
+        if q_target is not None:  # an IK failure keeps the arm where it is
+            self.last.move = self.controller.move_to(q_target, self._on_step)
+        self._target = np.asarray(plan.p_world_target, dtype=float).copy()
+        self.last.timings.ik_s = t1 - t0
+        self.last.timings.control_s = time.perf_counter() - t1
+
+    def observe(self) -> Observation | None:
+        t0 = time.perf_counter()
+        image = noisy_image(self.renderer.render(self.data, CAMERA_NAME), self.settings.sensor, self._rng)
+        t1 = time.perf_counter()
+        q_enc, p, R = self._measured_pose()
+        self.last.q, self.last.q_encoders = self.q, q_enc
+        ahead = R.T @ (self._target - p)
+        predicted = self.intrinsics.project(ahead) if ahead[0] > 1e-3 else None
+        s = self.settings
+        det = detect(image, self.intrinsics, s.fruit, s.measurement, s.detector, predicted)
+        self.last.detection = det
+        self.last.timings.render_s = t1 - t0
+        self.last.timings.detect_s = time.perf_counter() - t1
+        if self._keep_images:
+            self.last.image = image
+        if not isinstance(det, Detection):
+            return None
+        if s.measurement.kind == "camera":
+            return Observation(det.p_camera, CameraModel(p, R, det.cov_camera))
+        var = float(det.bearing_camera @ det.cov_camera @ det.bearing_camera)
+        return Observation(np.array([det.range_m]), RangeModel(p, var))
+
+    def view_info(self) -> dict[str, Any]:
+        """What happened in the last view, JSON-ready."""
+        last = self.last
+        det = last.detection
+        out: dict[str, Any] = {
+            "q_rad": None if last.q is None else last.q.tolist(),
+            "q_encoders_rad": None if last.q_encoders is None else last.q_encoders.tolist(),
+            "ik_failed": last.ik_failed,
+            "timings_s": vars(last.timings).copy(),
+        }
+        if last.q_encoders is not None:
+            p, R = self.kin.camera_pose(last.q_encoders)
+            out["camera_position_m"], out["camera_rotation"] = p.tolist(), R.tolist()
+        if last.move is not None:
+            out["move"] = vars(last.move).copy()
+        if isinstance(det, Detection):
+            out["detection"] = {
+                "centre_px": det.centre_px.tolist(),
+                "radius_px": det.radius_px,
+                "range_m": det.range_m,
+                "p_camera_m": det.p_camera.tolist(),
+                "cov_camera_m2": det.cov_camera.tolist(),
+                "trimmed_fraction": det.trimmed_fraction,
+            }
+        elif isinstance(det, NoDetection):
+            out["detection"] = {"none": det.reason}
+        return out
+
+    def close(self) -> None:
+        self.renderer.close()

@@ -1,0 +1,110 @@
+"""Seeded closed-loop scenario checks in the rendered greenhouse."""
+
+import json
+
+import imageio.v2 as imageio
+import mujoco
+import numpy as np
+import pytest
+
+from bve_mj.cli import main
+from bve_mj.config import Settings
+from bve_mj.experiments import with_overrides
+from bve_mj.mujoco_episode import run_mujoco_episode
+from bve_mj.robot import arm_kinematics
+from bve_mj.sim.scene import Fruit
+from bve_mj.video import EpisodeRecorder
+
+CAMERA = with_overrides(Settings(), measurement={"kind": "camera"})
+
+
+def _check_joint_limits(ep):
+    kin = arm_kinematics(ep.settings.robot.name, ep.settings.robot.joint_limits)
+    for v in ep.to_json()["views"]:
+        q = np.array(v["q_rad"])
+        assert np.all(q >= kin.limits.lower - 1e-3) and np.all(q <= kin.limits.upper + 1e-3)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_clear_scene_localised_within_10_mm_in_15_views(seed):
+    ep = run_mujoco_episode(CAMERA, seed, leaves=False, distractors=())
+    assert len(ep.result.views) - 1 <= 15
+    assert ep.final_error_mm < 10.0
+    assert ep.result.outcome in ("converged", "stable", "max_views")
+    _check_joint_limits(ep)
+
+
+def test_leaf_partly_covering_the_fruit_within_20_mm():
+    target = Fruit("target", np.array([0.42, 0.02, 0.22]), 0.034, "red")
+
+    def leaf(spec):  # a leaf hanging 5 cm in front of the fruit, over its +y side
+        spec.worldbody.add_geom(
+            name="occluding_leaf", type=mujoco.mjtGeom.mjGEOM_ELLIPSOID, size=[0.003, 0.035, 0.06],
+            pos=target.centre_m + np.array([-0.05, 0.045, 0.0]), rgba=[0.16, 0.42, 0.12, 1.0],
+            contype=0, conaffinity=0, group=1,
+        )  # fmt: skip
+
+    ep = run_mujoco_episode(CAMERA, 4, target=target, edit=leaf)
+    doc = ep.to_json()
+    trimmed = [
+        v["detection"]["trimmed_fraction"]
+        for v in doc["views"]
+        if "trimmed_fraction" in v.get("detection", {})
+    ]
+    assert max(trimmed) > 0.15  # the leaf did hide part of the silhouette in some view
+    assert ep.final_error_mm < 20.0
+    _check_joint_limits(ep)
+
+
+def test_approach_ends_close_without_touching_or_crossing_the_row():
+    s = with_overrides(CAMERA, episode={"approach": True, "views": 25})
+    target = Fruit("target", np.array([0.40, 0.0, 0.25]), 0.04, "red")
+    ep = run_mujoco_episode(s, 2, target=target)
+    assert ep.result.outcome == "approached"
+    row_x = s.scene.row_x_m
+    for v in ep.result.views:
+        gap = np.linalg.norm(v.p_world_camera - target.centre_m)
+        assert gap > target.radius_m + 0.01  # never touches the fruit
+        assert v.p_world_camera[0] < row_x  # never crosses the plant row
+    assert np.linalg.norm(ep.result.views[-1].p_world_camera - target.centre_m) <= 0.1 + 2e-3
+    _check_joint_limits(ep)
+
+
+def test_video_decodes_with_the_expected_frame_count(tmp_path):
+    path = tmp_path / "episode.mp4"
+    recorder = EpisodeRecorder(path)
+    ep = run_mujoco_episode(with_overrides(CAMERA, episode={"views": 3}), 1, recorder=recorder)
+    written = recorder.close()
+    reader = imageio.get_reader(str(path))
+    frames = [f for f in reader]  # (list() would ask the ffmpeg reader for an infinite length)
+    assert written == len(frames) == reader.count_frames() > len(ep.result.views) * recorder.hold_frames
+    assert frames[0].shape == (480, 1280, 3)
+
+
+def test_episode_cli_json_and_bad_input(tmp_path, capsys):
+    out = tmp_path / "ep.json"
+    assert main(["episode", "--seed", "1", "--views", "3", "--json", str(out), "--quiet"]) == 0
+    doc = json.loads(out.read_text())
+    for key in ("settings", "seed", "views", "final_error_mm", "outcome", "wall_s"):
+        assert key in doc
+    assert doc["seed"] == 1 and doc["views"][0]["view"] == 0
+    for key in (
+        "q_rad",
+        "camera_position_m",
+        "detection",
+        "estimate_m",
+        "covariance_m2",
+        "truth_m",
+        "timings_s",
+    ):
+        assert key in doc["views"][1]
+    capsys.readouterr()
+    for argv, field in (
+        (["episode", "--views", "0"], "views"),
+        (["episode", "--video", str(tmp_path / "x.avi")], "video"),
+        (["episode", "--experiment", "E42"], "episode.experiment"),
+        (["episode", "--measurement", "sonar"], "measurement.kind"),
+    ):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and field in err
