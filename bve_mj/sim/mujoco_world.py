@@ -6,6 +6,8 @@ it, through forward kinematics; never the planned pose.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -14,7 +16,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bve_mj.config import Settings
+from bve_mj.config import FruitPrior, MeasurementConfig, Settings
 from bve_mj.estimation.models import CameraModel, RangeModel
 from bve_mj.perception.detector import Detection, NoDetection, detect
 from bve_mj.planning.plan import ViewPlan
@@ -27,7 +29,27 @@ from bve_mj.sim.scene import SceneInfo
 from bve_mj.sim.sensors import calibrated_intrinsics, noisy_encoders, noisy_image
 from bve_mj.sim.world import Observation
 
-__all__ = ["MujocoWorld", "ViewTimings"]
+__all__ = ["MujocoWorld", "ViewTimings", "declared_noise"]
+
+
+def declared_noise(settings: Settings) -> tuple[MeasurementConfig, FruitPrior]:
+    """The measurement noise the filter is told, with the sensor model's errors folded in.
+
+    A principal-point error and encoder noise (through the focal length) move the blob
+    centre: they add in quadrature to its pixel σ. A focal-length error scales the range:
+    it adds to the relative range σ (as an equivalent uniform radius spread).
+    """
+    s, cam = settings.sensor, settings.camera
+    centre = math.sqrt(
+        settings.measurement.centre_sigma_px**2
+        + s.principal_point_error_px**2
+        + (2.5 * s.encoder_noise_rad * cam.focal_px) ** 2  # ~6 joints' errors at the camera
+    )
+    spread = math.sqrt(settings.fruit.radius_spread_rel**2 + 3.0 * s.focal_error_rel**2)
+    return (
+        dataclasses.replace(settings.measurement, centre_sigma_px=centre),
+        dataclasses.replace(settings.fruit, radius_spread_rel=min(spread, 0.99)),
+    )
 
 
 @dataclass
@@ -93,6 +115,7 @@ class MujocoWorld:
         self.renderer = OffscreenRenderer(model, cam.width_px, cam.height_px)
         self._rng = rng
         self.intrinsics = calibrated_intrinsics(cam, settings.sensor, rng)
+        self.measurement, self.fruit_prior = declared_noise(settings)
         self._target = np.asarray(target, dtype=float).copy()
         self._keep_images = keep_images
         self._on_step = on_step
@@ -144,7 +167,7 @@ class MujocoWorld:
         ahead = R.T @ (self._target - p)
         predicted = self.intrinsics.project(ahead) if ahead[0] > 1e-3 else None
         s = self.settings
-        det = detect(image, self.intrinsics, s.fruit, s.measurement, s.detector, predicted)
+        det = detect(image, self.intrinsics, self.fruit_prior, self.measurement, s.detector, predicted)
         self.last.detection = det
         self.last.timings.render_s = t1 - t0
         self.last.timings.detect_s = time.perf_counter() - t1

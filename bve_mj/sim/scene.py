@@ -171,6 +171,10 @@ def build_scene(
     sun.diffuse = [intensity, intensity, 0.95 * intensity]
     sun.specular = [0.1, 0.1, 0.1]
     sun.castshadow = False
+    # near clipping plane: MuJoCo's default is 1% of the model extent (centimetres in this
+    # scene), which clips a fruit the camera approaches; fix the extent, near plane at 5 mm
+    spec.stat.extent = 5.0
+    spec.visual.map.znear = 0.001
     spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
     spec.visual.headlight.diffuse = [0.25, 0.25, 0.25]
 

@@ -1,0 +1,40 @@
+"""An approach episode (paper eq. 13: localise while moving in) recorded as an mp4, plus a
+2x2 still of four moments of it (start, two midway, end) for the README.
+
+    python examples/approach_video.py [out.mp4] [seed]
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import imageio.v2 as imageio
+import numpy as np
+
+from bve_mj import Settings
+from bve_mj.experiments import with_overrides
+from bve_mj.mujoco_episode import run_mujoco_episode
+from bve_mj.video import EpisodeRecorder
+
+
+def main(out: str = "approach.mp4", seed: int = 1) -> None:
+    settings = with_overrides(
+        Settings(), measurement={"kind": "camera"}, episode={"approach": True, "views": 20}
+    )
+    recorder = EpisodeRecorder(out)
+    episode = run_mujoco_episode(settings, seed, recorder=recorder)
+    frames = recorder.close()
+    print(f"outcome {episode.result.outcome}, final error {episode.final_error_mm:.2f} mm")
+    print(f"wrote {out} ({frames} frames)")
+    reader = imageio.get_reader(out)
+    all_frames = [f for f in reader]
+    picks = [all_frames[int(i)][::2, ::2] for i in np.linspace(0, len(all_frames) - 1, 4)]
+    still = np.vstack([np.hstack(picks[:2]), np.hstack(picks[2:])])
+    png = Path(out).with_name(Path(out).stem + "_frames.png")
+    imageio.imwrite(png, still)
+    print(f"wrote {png}")
+
+
+if __name__ == "__main__":
+    main(*(sys.argv[1:2] or ["approach.mp4"]), *(int(a) for a in sys.argv[2:3]))

@@ -1,0 +1,28 @@
+"""One headless closed-loop episode, printed view by view (the same as `bve-mj episode`).
+
+python examples/headless_episode.py [seed]
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+from bve_mj import Settings
+from bve_mj.experiments import with_overrides
+from bve_mj.mujoco_episode import run_mujoco_episode
+
+
+def main(seed: int = 0) -> None:
+    settings = with_overrides(Settings(), measurement={"kind": "camera"})
+    episode = run_mujoco_episode(settings, seed)
+    for v in episode.result.views:
+        err = 1e3 * np.linalg.norm(v.belief.mean - episode.truth)
+        print(f"view {v.iteration:2d}: detected={v.measured!s:5}  error {err:7.2f} mm")
+    print(f"outcome {episode.result.outcome}, final error {episode.final_error_mm:.2f} mm, "
+          f"{episode.result.wall_s:.2f} s")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 0)
