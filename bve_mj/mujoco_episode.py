@@ -9,13 +9,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import mujoco
 import numpy as np
 
 from bve_mj.config import Settings, settings_to_dict
-from bve_mj.episode import EpisodeResult, StopRules, run_episode
+from bve_mj.episode import EpisodeResult, StopRules, ViewRecord, run_episode
 from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
 from bve_mj.experiments import EXPERIMENTS, with_overrides
@@ -23,9 +23,18 @@ from bve_mj.planning.constraints import ConstraintName
 from bve_mj.robot import ArmKinematics, arm_kinematics, look_at_ik, make_arm_planner
 from bve_mj.sim.mujoco_world import MujocoWorld
 from bve_mj.sim.scene import Fruit, SceneInfo, build_scene
-from bve_mj.video import EpisodeRecorder
 
-__all__ = ["MujocoEpisode", "episode_settings", "run_mujoco_episode"]
+__all__ = ["MujocoEpisode", "Recorder", "episode_settings", "run_mujoco_episode"]
+
+
+class Recorder(Protocol):
+    """What an episode recorder (``bve_mj.video.EpisodeRecorder``) offers the episode."""
+
+    def attach(self, world: MujocoWorld, prior: Belief) -> None: ...
+
+    def on_step(self, sim_time: float) -> None: ...
+
+    def on_view(self, record: ViewRecord) -> None: ...
 
 
 def episode_settings(settings: Settings) -> Settings:
@@ -134,7 +143,7 @@ def run_mujoco_episode(
     target: Fruit | None = None,
     distractors: tuple[Fruit, ...] | None = None,
     leaves: bool = True,
-    recorder: EpisodeRecorder | None = None,
+    recorder: Recorder | None = None,
     edit: Callable[[mujoco.MjSpec], None] | None = None,
 ) -> MujocoEpisode:
     """Build the seeded scene, start the arm at a ready pose, run the loop, return the log.

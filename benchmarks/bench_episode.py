@@ -1,0 +1,85 @@
+"""Closed-loop MuJoCo episodes: time per view by stage, covariance honesty, and the final
+error over seeded scenes for the BVE and the baselines, camera and range-only.
+
+    python benchmarks/bench_episode.py [--scenes 50] [--workers 2]
+
+Targets (issue 5): a 15-view episode without video in under 5 s on this machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from bve_mj import Settings
+from bve_mj.experiments import with_overrides
+from bve_mj.mujoco_episode import run_mujoco_episode
+
+ROWS = (("bve", "camera"), ("random", "camera"), ("circle", "camera"),
+        ("bve", "range"), ("random", "range"), ("circle", "range"))  # fmt: skip
+
+
+def _one(args: tuple[str, str, int]) -> tuple[str, str, int, float, float, int, str]:
+    planner, measurement, seed = args
+    s = with_overrides(Settings(), measurement={"kind": measurement}, planner={"kind": planner})
+    ep = run_mujoco_episode(s, seed)
+    d = ep.result.final.mean - ep.truth
+    nees = float(d @ np.linalg.solve(ep.result.final.cov, d))
+    return planner, measurement, seed, ep.final_error_mm, nees, len(ep.result.views), ep.result.outcome
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scenes", type=int, default=50)
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args()
+
+    # 1. a full 15-view episode (stopping rules off), time per stage
+    s = with_overrides(
+        Settings(),
+        measurement={"kind": "camera"},
+        episode={"views": 15, "stop_sigma_m": 1e-9, "stop_stable_m": 0.0},
+    )
+    walls, stages = [], {k: [] for k in ("plan_s", "ik_s", "control_s", "render_s", "detect_s")}
+    for seed in range(5):
+        t0 = time.perf_counter()
+        ep = run_mujoco_episode(s, seed)
+        walls.append(time.perf_counter() - t0)
+        for v in ep.to_json()["views"][1:]:
+            stages["plan_s"].append(v["plan_s"])
+            for k in ("ik_s", "control_s", "render_s", "detect_s"):
+                stages[k].append(v["timings_s"][k])
+    per_view = ", ".join(f"{k[:-2]} {1e3 * np.median(x):.1f}" for k, x in stages.items())
+    print(f"15-view episode without video (camera, BVE, 5 seeds): wall {np.median(walls):.2f} s median "
+          f"(max {max(walls):.2f} s, scene build and compile included)")  # fmt: skip
+    print(f"median per view [ms]: {per_view}")
+
+    # 2. final error and honesty over seeded scenes
+    tasks = [(p, m, seed) for p, m in ROWS for seed in range(args.scenes)]
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=args.workers) as pool:
+        results = list(pool.map(_one, tasks, chunksize=5))
+    print(f"\n{args.scenes} seeded scenes per row, default episode (E5 + band, stopping rules on), "
+          f"{time.perf_counter() - t0:.0f} s on {args.workers} workers")  # fmt: skip
+    print(f"{'planner':<8} {'measurement':<11} {'median mm':>9} {'p95 mm':>8} {'mean mm':>8} "
+          f"{'in 3σ %':>7} {'NEES':>6} {'views':>6} outcomes")  # fmt: skip
+    for p, m in ROWS:
+        rows = [r for r in results if r[0] == p and r[1] == m]
+        err = np.array([r[3] for r in rows])
+        nees = np.array([r[4] for r in rows])
+        outcomes: dict[str, int] = {}
+        for r in rows:
+            outcomes[r[6]] = outcomes.get(r[6], 0) + 1
+        print(
+            f"{p:<8} {m:<11} {np.median(err):9.2f} {np.percentile(err, 95):8.2f} {np.mean(err):8.2f} "
+            f"{100 * np.mean(nees <= 9.0):7.0f} {np.mean(nees):6.2f} {np.mean([r[5] for r in rows]):6.1f} "
+            f"{outcomes}",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
