@@ -11,6 +11,7 @@ known); the unknown-radius spread adds ±15% on top, as the covariance states.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 
 import mujoco
@@ -93,12 +94,14 @@ def main() -> None:
                 flush=True,
             )
 
-    # time per frame: render the eye-in-hand camera and detect, shadows off and on
-    spec, _ = build_scene(kin, s.scene, np.random.default_rng(1), s.camera)
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
+    # time per frame: render the eye-in-hand camera and detect, shadows off and on (the
+    # sun casts them only when the scene says so)
     for shadows in (False, True):
+        cfg = dataclasses.replace(s.scene, shadows=shadows)
+        spec, _ = build_scene(kin, cfg, np.random.default_rng(1), s.camera)
+        model = spec.compile()
+        data = mujoco.MjData(model)
+        mujoco.mj_forward(model, data)
         r = OffscreenRenderer(model, s.camera.width_px, s.camera.height_px, shadows=shadows)
         r.render(data, CAMERA_NAME)
         t_render, t_detect = [], []

@@ -434,6 +434,9 @@ class SceneConfig:
     light_intensity: tuple[float, float] = field(
         default=(0.55, 0.9), metadata=_why("diffuse intensity of the sun light, randomised")
     )
+    shadows: bool = field(
+        default=False, metadata=_why("the sun casts shadows: several times the render cost on a CPU")
+    )
 
     def __post_init__(self) -> None:
         _positive("scene", "pedestal_height_m", self.pedestal_height_m)
@@ -451,6 +454,8 @@ class SceneConfig:
         object.__setattr__(
             self, "light_intensity", _range("scene", "light_intensity", self.light_intensity, 0.0)
         )
+        if not isinstance(self.shadows, bool):
+            raise ConfigError("scene.shadows", self.shadows, "true or false")
         if self.target_x_m[1] >= self.row_x_m:
             raise ConfigError("scene.target_x_m", self.target_x_m, f"values below row_x_m = {self.row_x_m}")
 

@@ -112,7 +112,7 @@ class MujocoWorld:
         self.controller.hold(q_start)
         mujoco.mj_forward(model, self.data)
         cam = settings.camera
-        self.renderer = OffscreenRenderer(model, cam.width_px, cam.height_px)
+        self.renderer = OffscreenRenderer(model, cam.width_px, cam.height_px, shadows=settings.scene.shadows)
         self._rng = rng
         self.intrinsics = calibrated_intrinsics(cam, settings.sensor, rng)
         self.measurement, self.fruit_prior = declared_noise(settings)

@@ -170,7 +170,7 @@ def build_scene(
     sun.type = mujoco.mjtLightType.mjLIGHT_DIRECTIONAL
     sun.diffuse = [intensity, intensity, 0.95 * intensity]
     sun.specular = [0.1, 0.1, 0.1]
-    sun.castshadow = False
+    sun.castshadow = cfg.shadows
     # near clipping plane: MuJoCo's default is 1% of the model extent (centimetres in this
     # scene), which clips a fruit the camera approaches; fix the extent, near plane at 5 mm
     spec.stat.extent = 5.0
