@@ -9,6 +9,7 @@ Targets (issue 5): a 15-view episode without video in under 5 s on this machine.
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor
 
@@ -60,7 +61,11 @@ def main() -> None:
     # 2. final error and honesty over seeded scenes
     tasks = [(p, m, seed) for p, m in ROWS for seed in range(args.scenes)]
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
+    # spawn, not fork: this process already holds EGL contexts, which forked children
+    # inherit in a state that deadlocks their own rendering
+    with ProcessPoolExecutor(
+        max_workers=args.workers, mp_context=multiprocessing.get_context("spawn")
+    ) as pool:
         results = list(pool.map(_one, tasks, chunksize=5))
     print(f"\n{args.scenes} seeded scenes per row, default episode (E5 + band, stopping rules on), "
           f"{time.perf_counter() - t0:.0f} s on {args.workers} workers")  # fmt: skip
