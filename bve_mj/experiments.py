@@ -194,15 +194,9 @@ class ExperimentSummary:
     description: str
     runs: int
     metrics: dict[str, float]
-    status: str = "ok"
 
     def as_dict(self) -> dict[str, object]:
-        return {
-            "description": self.description,
-            "status": self.status,
-            "runs": self.runs,
-            **self.metrics,
-        }
+        return {"description": self.description, "runs": self.runs, **self.metrics}
 
 
 def summarise(experiment: Experiment, records: Sequence[RunRecord]) -> ExperimentSummary:
