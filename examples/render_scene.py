@@ -21,6 +21,7 @@ from bve_mj.robot import ArmKinematics, get_robot, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.render import OffscreenRenderer
 from bve_mj.sim.scene import build_scene
+from bve_mj.video import draw_detection
 
 
 def main(seed: int = 4, out_dir: str = "assets") -> None:
@@ -41,18 +42,10 @@ def main(seed: int = 4, out_dir: str = "assets") -> None:
     p, R = kin.camera_pose(ik.q)
     predicted = intr.project(R.T @ (k - p))
     det = detect(eye, intr, s.fruit, s.measurement, s.detector, predicted)
-    shown = cv2.cvtColor(eye, cv2.COLOR_RGB2BGR)
+    caption = f"true range {np.linalg.norm(k - p):.3f} m"
     if isinstance(det, Detection):
-        c = tuple(int(x) for x in np.rint(det.centre_px).astype(int))
-        cv2.circle(shown, c, int(np.rint(det.radius_px)), (255, 255, 0), 2, cv2.LINE_AA)
-        cv2.drawMarker(shown, c, (255, 255, 0), cv2.MARKER_CROSS, 14, 2)
-        lines = [
-            f"range {det.range_m:.3f} m, true {np.linalg.norm(k - p):.3f} m",
-            f"(assumed r {1e3 * s.fruit.radius_m:.0f} mm, true {1e3 * info.target.radius_m:.1f} mm)",
-        ]
-        for i, line in enumerate(lines):
-            cv2.putText(shown, line, (12, 28 + 28 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2,
-                        cv2.LINE_AA)  # fmt: skip
+        caption += f"; assumed r {1e3 * s.fruit.radius_m:.0f} mm, true {1e3 * info.target.radius_m:.1f} mm"
+    shown = cv2.cvtColor(draw_detection(eye, det, caption), cv2.COLOR_RGB2BGR)
     out = Path(out_dir)
     outside = cv2.cvtColor(
         renderer.render_free(data, np.array([0.3, 0.0, 0.15]), 1.9, 25, -20), cv2.COLOR_RGB2BGR
