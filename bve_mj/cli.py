@@ -8,15 +8,15 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 import os
 import sys
-import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
+
+from bve_mj.atomic import write_json_atomic
 
 __all__ = ["main"]
 
@@ -81,6 +81,68 @@ def _build_parser() -> argparse.ArgumentParser:
     ep.add_argument("--plots", default=None, help="write PREFIX_path.png and PREFIX_error.png")
     ep.add_argument("--json", default=None, help="write the episode log (settings, views, outcome) here")
     ep.add_argument("--quiet", action="store_true", help="print only the summary")
+    ep.add_argument("--initial-error", default=None, help="prior error half-width e0 [m] (default 0.05)")
+
+    for name, helptext, desc in (
+        (
+            "campaign",
+            "seeded Monte-Carlo runs: experiment x world x planner x measurement x initial error",
+            "Run (or resume) a campaign into a directory: runs.sqlite, runs.csv, summary.json, plots.",
+        ),
+        (
+            "recoverability",
+            "the paper's recoverability sweep: final error against initial error 0-0.5 m",
+            "A campaign over initial errors (default 0:0.5:0.01 m, 10 runs each, E1,E5,E6,E10).",
+        ),
+    ):
+        recover = name == "recoverability"
+        c = sub.add_parser(name, help=helptext, description=desc)
+        c.add_argument("--out", required=True, help="campaign directory (created; resumed if it holds one)")
+        c.add_argument(
+            "--experiments",
+            default="E1,E5,E6,E10" if recover else "E1,E2,E3,E4,E5,E6,E7,E8,E9,E10",
+            help="comma-separated, e.g. E1,E6",
+        )
+        c.add_argument("--worlds", default="synthetic", help="synthetic, mujoco or synthetic,mujoco")
+        c.add_argument("--planners", default="bve", help="any of bve,random,circle")
+        c.add_argument(
+            "--measurements", default=None, help="range,camera (default: range synthetic, camera mujoco)"
+        )
+        c.add_argument(
+            "--initial-errors",
+            default="0:0.5:0.01" if recover else None,
+            help="e0 [m]: X, X,Y,... or START:STOP:STEP (default: "
+            + ("0:0.5:0.01)" if recover else "protocol.initial_error_m, episode.initial_error_m)"),
+        )
+        c.add_argument("--runs", default="10" if recover else "100", help="runs per cell")
+        c.add_argument("--seed", default="0", help="base seed (default 0)")
+        c.add_argument("--steps", default=None, help="synthetic: planned views per run (default 30)")
+        c.add_argument("--views", default=None, help="mujoco: most planned views per run (default 15)")
+        c.add_argument("--approach", action="store_true", help="approach mode (eq. 13 term on)")
+        c.add_argument(
+            "--recovered-mm", default="30", help="a run 'recovered' below this final error (default 30)"
+        )
+        c.add_argument("--config", default=None, help="TOML file of settings (sections as in bve_mj.config)")
+        c.add_argument("--workers", default=None, help="local processes (default: all cores)")
+        c.add_argument("--scheduler", default=None, help="Dask distributed scheduler address instead")
+        c.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+        c.add_argument("--quiet", action="store_true", help="no progress on stderr, no per-cell table")
+    res = sub.add_parser(
+        "results",
+        help="run (or resume) the results campaigns and write docs/results.md with its figures",
+        description="The paper's table beside ours, recoverability curves, baselines, sample paths.",
+    )
+    res.add_argument("--out", default="docs/results.md", help="the page (figures go to results/ beside it)")
+    res.add_argument("--work", default="results_work", help="campaign directories (resumable)")
+    res.add_argument("--runs", default="100", help="synthetic runs per cell (default 100)")
+    res.add_argument("--mujoco-runs", default="20", help="MuJoCo episodes per cell (default 20)")
+    res.add_argument("--recover-runs", default="10", help="runs per initial error (default 10)")
+    res.add_argument("--recover-grid", default="0:0.5:0.01", help="initial errors [m] (default 0:0.5:0.01)")
+    res.add_argument("--experiments", default="E1,E2,E3,E4,E5,E6,E7,E8,E9,E10", help="comma-separated")
+    res.add_argument("--seed", default="0", help="base seed (default 0)")
+    res.add_argument("--workers", default=None, help="local processes (default: all cores)")
+    res.add_argument("--scheduler", default=None, help="Dask distributed scheduler address instead")
+    res.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return parser
 
 
@@ -112,29 +174,6 @@ def _check_output_path(name: str, path: str | None) -> Path | None:
     if not os.access(parent, os.W_OK):
         raise ConfigError(name, path, f"a path in a writable directory ({parent} is not writable)")
     return p
-
-
-def write_json_atomic(path: Path, document: Any) -> None:
-    """Write JSON to a temporary file beside ``path``, then rename: never a torn file."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(document, f, indent=2, default=_jsonable)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _jsonable(obj: Any) -> Any:
-    import numpy as np
-
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")
 
 
 def _progress(enabled: bool) -> Any:
@@ -284,7 +323,12 @@ def _cmd_episode(args: argparse.Namespace) -> int:
                 "plots", args.plots, "matplotlib installed: pip install 'bve_mj[plots]'"
             ) from None
     settings = load_settings(args.config) if args.config else Settings()
-    episode = {k: v for k, v in (("experiment", args.experiment), ("views", views)) if v is not None}
+    initial_error = _float_arg("initial-error", args.initial_error, 0.0)
+    episode = {
+        k: v
+        for k, v in (("experiment", args.experiment), ("views", views), ("initial_error_m", initial_error))
+        if v is not None
+    }
     if args.approach:
         episode["approach"] = True
     planner = {
@@ -356,6 +400,149 @@ def _cmd_episode(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _float_arg(name: str, text: str | None, minimum: float, strict: bool = False) -> float | None:
+    from bve_mj.errors import ConfigError
+
+    if text is None:
+        return None
+    allowed = f"a number {'>' if strict else '>='} {minimum:g}"
+    try:
+        value = float(text)
+    except ValueError:
+        raise ConfigError(name, text, allowed) from None
+    if not math.isfinite(value) or value < minimum or (strict and value == minimum):
+        raise ConfigError(name, text, allowed)
+    return value
+
+
+def _cmd_campaign(args: argparse.Namespace) -> int:
+    from bve_mj.campaign import CampaignSpec, parse_grid, run_campaign
+    from bve_mj.campaign_report import format_cells, write_campaign_outputs
+    from bve_mj.config import Settings, load_settings
+    from bve_mj.experiments import parse_experiments, with_overrides
+
+    experiments = tuple(e.name for e in parse_experiments(args.experiments))
+    runs = _int_arg("runs", args.runs, 1)
+    seed = _int_arg("seed", args.seed, 0) or 0
+    steps = _int_arg("steps", args.steps, 1)
+    views = _int_arg("views", args.views, 1)
+    workers = _int_arg("workers", args.workers, 1)
+    recovered = _float_arg("recovered-mm", args.recovered_mm, 0.0, strict=True)
+    errors = parse_grid(args.initial_errors) if args.initial_errors is not None else ()
+    worlds = args.worlds
+    if args.measurements is None:
+        names = [w.strip() for w in worlds.split(",")]
+        measurements = ",".join(dict.fromkeys("camera" if w == "mujoco" else "range" for w in names))
+    else:
+        measurements = args.measurements
+    if args.out and Path(args.out).exists() and not Path(args.out).is_dir():
+        from bve_mj.errors import ConfigError
+
+        raise ConfigError("out", args.out, "a directory (a file is there)")
+    if args.no_plots is False:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            from bve_mj.errors import ConfigError
+
+            allowed = "installed (pip install 'bve_mj[plots]'), or --no-plots"
+            raise ConfigError("plots", "matplotlib", allowed) from None
+    spec = CampaignSpec(
+        experiments=experiments,
+        worlds=tuple(worlds.split(",")),  # validated by CampaignSpec
+        planners=tuple(args.planners.split(",")),
+        measurements=tuple(measurements.split(",")),
+        initial_errors_m=errors,
+        runs=runs or 1,
+        seed=seed,
+        approach=args.approach,
+        recovered_mm=recovered or 30.0,
+    )
+    settings = load_settings(args.config) if args.config else Settings()
+    settings = with_overrides(
+        settings,
+        protocol={"steps": steps} if steps else {},
+        episode={"views": views} if views else {},
+    )
+    print(
+        f"bve-mj {args.command}: {len(spec.cells(settings))} cells x {spec.runs} runs "
+        f"(worlds {','.join(spec.worlds)}; experiments {','.join(spec.experiments)}; planners "
+        f"{','.join(spec.planners)}; measurements {','.join(spec.measurements)}; initial errors "
+        f"{_grid_text(spec.initial_errors_m)}), seed {seed} -> {args.out}"
+    )
+    show = not args.quiet and sys.stderr.isatty()
+    result = run_campaign(
+        settings, spec, args.out, workers=workers, scheduler=args.scheduler, progress=_progress(show)
+    )
+    if result.resumed_runs:
+        print(f"resumed: {result.resumed_runs} runs were already done, {result.computed_runs} computed now")
+    if not args.quiet:
+        for line in format_cells(result):
+            print(line)
+    n = result.computed_runs
+    print(
+        f"wall time {result.wall_s:.1f} s for {n} runs"
+        + (f" ({n / result.wall_s:.2f} runs/s)" if n and result.wall_s > 0 else "")
+    )
+    for path in write_campaign_outputs(result, plots=not args.no_plots):
+        print(f"wrote {path}")
+    if result.crashed:
+        print(
+            f"bve-mj: {len(result.crashed)} runs crashed (kept out of the metrics; a resume retries them):",
+            file=sys.stderr,
+        )
+        for line in result.crashed[:5]:
+            print(f"  {line}", file=sys.stderr)
+        return EXIT_FAILURE
+    return EXIT_OK
+
+
+def _cmd_results(args: argparse.Namespace) -> int:
+    from bve_mj.campaign import parse_grid
+    from bve_mj.config import Settings
+    from bve_mj.errors import ConfigError
+    from bve_mj.experiments import parse_experiments
+    from bve_mj.results_page import PageOptions, build_results_page
+
+    grid = parse_grid(args.recover_grid)
+    options = PageOptions(
+        runs=_int_arg("runs", args.runs, 1) or 1,
+        mujoco_runs=_int_arg("mujoco-runs", args.mujoco_runs, 1) or 1,
+        recover_runs=_int_arg("recover-runs", args.recover_runs, 1) or 1,
+        recover_grid=grid,
+        experiments=tuple(e.name for e in parse_experiments(args.experiments)),
+        seed=_int_arg("seed", args.seed, 0) or 0,
+    )
+    workers = _int_arg("workers", args.workers, 1)
+    out = _check_output_path("out", args.out)
+    assert out is not None
+    if out.suffix.lower() != ".md":
+        raise ConfigError("out", args.out, "a path ending in .md")
+    work = Path(args.work)
+    if work.exists() and not work.is_dir():
+        raise ConfigError("work", args.work, "a directory (a file is there)")
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise ConfigError("plots", "matplotlib", "installed: pip install 'bve_mj[plots]'") from None
+    show = not args.quiet and sys.stderr.isatty()
+    t0 = time.perf_counter()
+    written = build_results_page(
+        Settings(), out, work, options, workers=workers, scheduler=args.scheduler,
+        progress=lambda _name: _progress(show),
+    )  # fmt: skip
+    print(f"wrote {len(written)} files in {time.perf_counter() - t0:.0f} s; the page: {out}")
+    return EXIT_OK
+
+
+def _grid_text(errors: Sequence[float]) -> str:
+    if not errors:
+        return "default"
+    if len(errors) > 3:
+        return f"{errors[0]:g}..{errors[-1]:g} m ({len(errors)} values)"
+    return ",".join(f"{e:g}" for e in errors) + " m"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``bve-mj``; returns the exit status."""
     from bve_mj.errors import BveError, ConfigError
@@ -366,10 +553,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command is None:
             parser.print_help()
             return EXIT_USAGE
-        if args.command == "paper":
-            return _cmd_paper(args)
-        if args.command == "episode":
-            return _cmd_episode(args)
+        from threadpoolctl import threadpool_limits
+
+        # one BLAS thread: results then match a campaign's (its workers pin it too), and a
+        # multi-threaded BLAS only adds overhead to 3x3 algebra
+        with threadpool_limits(limits=1, user_api="blas"):
+            if args.command == "paper":
+                return _cmd_paper(args)
+            if args.command == "episode":
+                return _cmd_episode(args)
+            if args.command in ("campaign", "recoverability"):
+                return _cmd_campaign(args)
+            if args.command == "results":
+                return _cmd_results(args)
         raise _UsageError(f"bve-mj: unknown command {args.command!r}")  # pragma: no cover
     except _UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)

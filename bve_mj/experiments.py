@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bve_mj.config import LossName, ProtocolConfig, Settings, settings_to_dict
-from bve_mj.episode import run_episode
+from bve_mj.episode import EpisodeResult, run_episode
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.belief import Belief
 from bve_mj.metrics import consistency_metrics, euclidean_metrics, paper_metrics
@@ -40,6 +40,7 @@ __all__ = [
     "run_table",
     "sample_scenario",
     "summarise",
+    "synthetic_episode",
 ]
 
 
@@ -148,8 +149,10 @@ def for_robot(settings: Settings) -> Settings:
     )
 
 
-def run_synthetic(settings: Settings, experiment: Experiment, seed: int, run: int) -> RunRecord:
-    """Run ``run`` of ``experiment`` in the synthetic world.
+def synthetic_episode(
+    settings: Settings, experiment: Experiment, seed: int, run: int
+) -> tuple[Scenario, EpisodeResult]:
+    """Run ``run`` of ``experiment`` in the synthetic world: its scenario and its episode.
 
     Experiments with the arm (E5, E10) start the camera where the arm at ``home`` holds it,
     not at the protocol's random start (which the arm cannot reach); fruit, initial
@@ -170,7 +173,13 @@ def run_synthetic(settings: Settings, experiment: Experiment, seed: int, run: in
         planner = make_planner(settings, experiment.loss, experiment.constraints, planner_rng)
     world = SyntheticWorld(settings, scenario, np.random.default_rng(noise_ss))
     prior = Belief.isotropic(scenario.initial_estimate, settings.filter.initial_sigma_m)
-    result = run_episode(world, planner, prior, settings.filter, settings.protocol.steps)
+    return scenario, run_episode(world, planner, prior, settings.filter, settings.protocol.steps)
+
+
+def run_synthetic(settings: Settings, experiment: Experiment, seed: int, run: int) -> RunRecord:
+    """Run ``run`` of ``experiment`` in the synthetic world (:func:`synthetic_episode`),
+    reduced to what the tables need."""
+    scenario, result = synthetic_episode(settings, experiment, seed, run)
     planned = result.views[1:]
     return RunRecord(
         experiment=experiment.name,

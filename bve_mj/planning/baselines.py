@@ -6,6 +6,11 @@
   a constraint blocks the orbit.
 
 Both restore feasibility exactly as the BVE does when no point within reach is feasible.
+Constraints marked ``expensive`` (the arm's :class:`~bve_mj.robot.planner.Reachability`, an
+IK solve per evaluation) are checked only on points that pass every cheap one: the random
+planner tries candidates until one is reachable, the circle planner projects its orbit
+point onto the cheap set and then backs off towards the current camera until the arm
+reaches it.
 """
 
 from __future__ import annotations
@@ -32,6 +37,20 @@ from bve_mj.planning.plan import PlanStatus, ViewPlan
 from bve_mj.planning.solve import feasible_start, minimise
 
 __all__ = ["CirclePlanner", "RandomPlanner"]
+
+
+_MAX_EXPENSIVE_CHECKS = 16
+
+
+def _split(task: Sequence[Constraint]) -> tuple[list[Constraint], list[Constraint]]:
+    """(cheap, expensive) constraints; expensive ones carry ``expensive = True``."""
+    cheap = [c for c in task if not getattr(c, "expensive", False)]
+    return cheap, [c for c in task if getattr(c, "expensive", False)]
+
+
+def _holds(constraints: Sequence[Constraint], x: np.ndarray, tol: float) -> bool:
+    """Every constraint holds at x (stops at the first violation)."""
+    return all(g.value(x) <= tol for g in constraints)
 
 
 def _restore_or_none(
@@ -68,14 +87,25 @@ class RandomPlanner:
         k_hat, c_now = belief.mean, np.asarray(p_world_camera, dtype=float)
         r_d = self.settings.constraints.step_m
         task = build_constraints(self.constraint_names, self.settings, k_hat, self.extra_constraints)
+        cheap, expensive = _split(task)
         step = StepLimit(c_now, r_d)
         d = self.rng.standard_normal((self.samples, 3))
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         candidates = c_now + d * (r_d * self.rng.random((self.samples, 1)) ** (1.0 / 3.0))
+        checks = 0
         for x in candidates:
-            if max_violation(task, x) <= tol:
-                return ViewPlan(x, k_hat, "optimal", True, 0.0, plan_s=time.perf_counter() - t0)
-        restoring, x = _restore_or_none(task, step, c_now, k_hat, tol, t0)
+            if not _holds(cheap, x, tol):
+                continue
+            if expensive:
+                if checks == _MAX_EXPENSIVE_CHECKS:
+                    break
+                checks += 1
+                if not _holds(expensive, x, tol):
+                    continue
+            return ViewPlan(x, k_hat, "optimal", True, 0.0, plan_s=time.perf_counter() - t0)
+        restoring, x = _restore_or_none(cheap, step, c_now, k_hat, tol, t0)
+        if expensive and restoring is None and not _holds(expensive, x, tol):
+            x = c_now  # nothing reachable found: stay (the arm is there)
         if restoring is not None:
             return restoring
         return ViewPlan(x, k_hat, "best_feasible", True, 0.0, plan_s=time.perf_counter() - t0)
@@ -114,8 +144,9 @@ class CirclePlanner:
         k_hat, c_now = belief.mean, np.asarray(p_world_camera, dtype=float)
         r_d = self.settings.constraints.step_m
         task = build_constraints(self.constraint_names, self.settings, k_hat, self.extra_constraints)
+        cheap, expensive = _split(task)
         step = StepLimit(c_now, r_d)
-        restoring, x_start = _restore_or_none(task, step, c_now, k_hat, tol, t0)
+        restoring, x_start = _restore_or_none(cheap, step, c_now, k_hat, tol, t0)
         if restoring is not None:
             return restoring
         target = self._orbit_target(k_hat, x_start)
@@ -124,9 +155,16 @@ class CirclePlanner:
             d = x - target
             return float(d @ d), 2.0 * d
 
-        every: list[Constraint] = [*task, step]
+        every: list[Constraint] = [*cheap, step]
         res = minimise(distance_sq, every, x_start, "slsqp", p.max_iterations)
         x = res.x if np.all(np.isfinite(res.x)) and max_violation(every, res.x) <= tol else x_start
+        if expensive:  # back off towards the current camera until the arm reaches the point
+            for _ in range(5):
+                if _holds(expensive, x, tol):
+                    break
+                x = 0.5 * (x + c_now)
+            else:
+                x = c_now
         if float(np.linalg.norm(x - c_now)) < 0.25 * r_d:
             self.direction = -self.direction  # blocked: go back along the orbit
         status: PlanStatus = "optimal" if x is res.x else "best_feasible"

@@ -60,6 +60,7 @@ class Reachability:
     q_warm: np.ndarray
     tol_m: float = 2e-4
     name: str = "reachable"
+    expensive: bool = True  # an IK solve per evaluation: baselines check it last
     last: IkResult | None = field(default=None, init=False)
     _rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0), init=False)
 
