@@ -36,6 +36,7 @@ from bve_mj.config import Settings, settings_to_dict
 from bve_mj.episode import EpisodeResult
 from bve_mj.errors import BveError, ConfigError
 from bve_mj.experiments import EXPERIMENTS, for_robot, synthetic_episode, with_overrides
+from bve_mj.robot import arm_kinematics
 
 __all__ = [
     "WORLDS",
@@ -216,12 +217,26 @@ def episode_seed(seed: int, run: int) -> int:
 
 
 def _row(
-    cell: Cell, run: int, seed: int, truth: np.ndarray, result: EpisodeResult, ep_seed: int | None
+    cell: Cell,
+    run: int,
+    seed: int,
+    truth: np.ndarray,
+    result: EpisodeResult,
+    ep_seed: int | None,
+    joint_violation_rad: float = 0.0,
 ) -> dict[str, Any]:
     final = result.final
     d = final.mean - truth
     planned = result.views[1:]
     errors = [float(np.linalg.norm(v.belief.mean - truth)) * 1e3 for v in result.views]
+    events: dict[str, int] = {}
+    for v in result.views:
+        for e in v.events:
+            key = e.split(":")[0]
+            events[key] = events.get(key, 0) + 1
+    finite = all(
+        np.all(np.isfinite(v.belief.mean)) and np.all(np.isfinite(v.belief.cov)) for v in result.views
+    )
     return {
         "key": cell.key(run),
         "world": cell.world,
@@ -241,6 +256,13 @@ def _row(
         "sigma_max_mm": float(np.sqrt(np.linalg.eigvalsh(final.cov)[-1])) * 1e3,
         "plan_ms_median": float(np.median([v.plan_s for v in planned])) * 1e3 if planned else 0.0,
         "restoring_steps": sum(v.plan_status == "restoring" for v in planned),
+        "fallback_steps": sum(v.plan_status == "fallback" for v in planned),
+        "events": events,
+        "belief_finite": bool(finite),
+        "joint_limit_violation_rad": joint_violation_rad,
+        "min_camera_fruit_distance_m": min(
+            (float(np.linalg.norm(v.p_world_camera - truth)) for v in result.views), default=float("nan")
+        ),
         "detected_views": sum(v.measured for v in result.views),
         "accepted_views": sum(v.accepted for v in result.views),
         "wall_s": result.wall_s,
@@ -269,7 +291,15 @@ def run_cell(settings: Settings, cell: Cell, seed: int, run: int) -> dict[str, A
 
         ep_seed = episode_seed(seed, run)
         episode = run_mujoco_episode(s, ep_seed)
-        return _row(cell, run, seed, episode.truth, episode.result, ep_seed)
+        kin = arm_kinematics(s.robot.name, s.robot.joint_limits)
+        violation = 0.0
+        for v in episode.result.views:
+            q = (v.world or {}).get("q_rad")
+            if q is not None:
+                qa = np.asarray(q)
+                below, above = kin.limits.lower - qa, qa - kin.limits.upper
+                violation = max(violation, float(np.max(np.maximum(below, above))))
+        return _row(cell, run, seed, episode.truth, episode.result, ep_seed, max(violation, 0.0))
     except BveError as exc:
         return _failed_row(cell, seed, run, "failed", str(exc))
 

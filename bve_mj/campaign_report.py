@@ -35,8 +35,8 @@ __all__ = [
 CSV_COLUMNS = (
     "world", "experiment", "planner", "measurement", "initial_error_m", "approach", "run", "seed",
     "episode_seed", "outcome", "views", "error_mm", "error_x_mm", "error_y_mm", "error_z_mm", "nees",
-    "sigma_max_mm", "plan_ms_median", "restoring_steps", "detected_views", "accepted_views", "wall_s",
-    "message",
+    "sigma_max_mm", "plan_ms_median", "restoring_steps", "fallback_steps", "detected_views",
+    "accepted_views", "joint_limit_violation_rad", "min_camera_fruit_distance_m", "wall_s", "message",
 )  # fmt: skip
 """``runs.csv``: one line per run; errors are estimate - truth [mm]; blank where a run failed."""
 

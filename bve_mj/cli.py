@@ -1,7 +1,8 @@
 """The ``bve-mj`` command.
 
 Exit status: 0 on success; 2 on bad input, with one line naming the field and what is
-allowed; 1 on an internal failure.
+allowed; 1 on an internal failure (or, for a campaign, when a run crashed); 3 when an
+episode could not localise the fruit: out of the arm's reach, or never detected.
 """
 
 from __future__ import annotations
@@ -20,7 +21,9 @@ from bve_mj.atomic import write_json_atomic
 
 __all__ = ["main"]
 
-EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_NOT_LOCALISED = 0, 1, 2, 3
+NOT_LOCALISED = ("unreachable", "never_detected")
+"""Episode outcomes that exit 3: the fruit was out of the arm's reach, or never seen."""
 
 
 class _UsageError(Exception):
@@ -387,6 +390,15 @@ def _cmd_episode(args: argparse.Namespace) -> int:
         f"IK {stage['ik_s']:.1f} ms, control {stage['control_s']:.1f} ms, "
         f"render {stage['render_s']:.1f} ms, detect {stage['detect_s']:.1f} ms"
     )
+    counts: dict[str, int] = {}
+    for rec in result.result.views:
+        for event in rec.events:
+            kind = event.split(":")[0]
+            counts[kind] = counts.get(kind, 0) + 1
+    if counts:
+        print("events: " + ", ".join(f"{k} x{n}" for k, n in sorted(counts.items())))
+    if doc["outcome"] == "unreachable":
+        print("the arm cannot reach a pose that looks at the fruit's estimate: nothing was measured")
     if video_path is not None:
         print(f"wrote {video_path} ({frames} frames)")
     if plots_prefix is not None:
@@ -397,7 +409,7 @@ def _cmd_episode(args: argparse.Namespace) -> int:
     if json_path is not None:
         write_json_atomic(json_path, doc)
         print(f"wrote {json_path}")
-    return EXIT_OK
+    return EXIT_NOT_LOCALISED if doc["outcome"] in NOT_LOCALISED else EXIT_OK
 
 
 def _float_arg(name: str, text: str | None, minimum: float, strict: bool = False) -> float | None:

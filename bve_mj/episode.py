@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -9,10 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from bve_mj.config import FilterConfig
+from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.ekf import predict, update
-from bve_mj.planning.plan import Planner, PlanStatus
-from bve_mj.sim.world import World
+from bve_mj.planning.plan import Planner, PlanStatus, ViewPlan
+from bve_mj.sim.world import Observation, World
 
 __all__ = ["EpisodeResult", "StopRules", "ViewRecord", "run_episode"]
 
@@ -21,7 +23,9 @@ __all__ = ["EpisodeResult", "StopRules", "ViewRecord", "run_episode"]
 class ViewRecord:
     """One view: where the camera was, what the planner said, what the filter made of it.
 
-    ``iteration`` 0 is the view from the start pose (no plan: status None).
+    ``iteration`` 0 is the view from the start pose (no plan: status None). ``events``: what
+    went wrong and how it was handled (``planner_failed: ...``, ``ik_failed``, and injected
+    faults: ``dropped``, ``false_detection``, ``outlier``, ``ik_failure``).
     """
 
     iteration: int
@@ -34,6 +38,7 @@ class ViewRecord:
     nis: float
     belief: Belief
     world: dict[str, object] | None = None
+    events: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -42,7 +47,8 @@ class StopRules:
 
     Attributes:
         sigma_m: the largest posterior standard deviation falls below this ("converged").
-        stable_m: the estimate moves less than this over ``stable_views`` views ("stable").
+        stable_m: the estimate moves less than this over ``stable_views`` views, each with an
+            accepted measurement ("stable"; a gated-out view does not count as agreement).
         approach_distance_m: the camera is this close to the estimate ("approached").
     """
 
@@ -60,7 +66,7 @@ class StopRules:
         if self.sigma_m is not None and np.sqrt(np.linalg.eigvalsh(b.cov)[-1]) <= self.sigma_m:
             return "converged"
         n = self.stable_views
-        if self.stable_m is not None and len(views) > n and all(v.measured for v in views[-n:]):
+        if self.stable_m is not None and len(views) > n and all(v.accepted for v in views[-n:]):
             moves = [
                 np.linalg.norm(views[-i].belief.mean - views[-i - 1].belief.mean) for i in range(1, n + 1)
             ]
@@ -94,39 +100,109 @@ def run_episode(
 ) -> EpisodeResult:
     """Observe from the start pose, then up to ``steps`` times: plan, move, predict, observe,
     update; ``stop`` may end it early. Outcome: the rule that ended it, "max_views", or
-    "never_detected" when no view measured the fruit."""
+    "never_detected" when no view measured the fruit.
+
+    A planner that fails (raises a :class:`BveError`, a numerical error, or returns a
+    non-finite point) does not end the episode: the camera holds where it is, looking at the
+    estimate, and the view records ``fallback`` and the reason.
+
+    Raises:
+        EstimationError: naming the view, when a measurement would put NaN or infinite
+            values into the belief (it never does).
+    """
     t0 = time.perf_counter()
     Q = np.eye(3) * filter_config.process_sigma_m**2
     gate = filter_config.gate_probability
     belief = prior
     views: list[ViewRecord] = []
 
-    def fuse(i: int, status: PlanStatus | None, feasible: bool, plan_s: float) -> None:
+    sync = getattr(planner, "set_configuration", None)
+    rejected: list[Observation] = []  # gated-out measurements since the last accepted one
+
+    def fuse(i: int, status: PlanStatus | None, feasible: bool, plan_s: float, events: list[str]) -> None:
         nonlocal belief
         obs = world.observe()
         measured, accepted, nis = obs is not None, False, float("nan")
         if obs is not None:
-            result = update(belief, obs.z, obs.model, gate)
+            try:
+                result = update(belief, obs.z, obs.model, gate)
+                if result.accepted:
+                    rejected.clear()
+                else:
+                    rejected.append(obs)
+                    if len(rejected) >= filter_config.reset_after_rejections:
+                        reset = _reopen(belief.mean, prior.cov, rejected, gate)
+                        if reset is not None:  # the belief had locked onto something wrong
+                            events.append("belief_reset")
+                            result = dataclasses.replace(result, belief=reset, accepted=True)
+                            rejected.clear()
+                        else:  # the rejected ones disagree among themselves: outliers
+                            rejected.pop(0)
+            except EstimationError as exc:
+                raise EstimationError(f"view {i}: {exc}; the episode stops here") from None
             belief, accepted, nis = result.belief, result.accepted, result.nis
         info = world.view_info() if hasattr(world, "view_info") else None
+        if info is not None:
+            events += [str(e) for e in info.get("faults", [])]
+            if info.get("ik_failed") and "ik_failure" not in events:
+                events.append("ik_failed")
         views.append(
             ViewRecord(
-                i, world.p_world_camera, status, feasible, plan_s, measured, accepted, nis, belief, info
+                i, world.p_world_camera, status, feasible, plan_s, measured, accepted, nis, belief, info,
+                tuple(events),
             )
-        )
+        )  # fmt: skip
+        q = getattr(world, "q_measured", None)
+        if sync is not None and q is not None:
+            sync(q)
         if on_view is not None:
             on_view(views[-1])
 
-    fuse(0, None, True, 0.0)
+    fuse(0, None, True, 0.0, [])
     outcome = None
     for i in range(1, steps + 1):
-        plan = planner.plan(belief, world.p_world_camera, i)
+        plan, events = _plan_or_hold(planner, belief, world.p_world_camera, i)
         world.move_camera(plan)
         belief = predict(belief, Q)
-        fuse(i, plan.status, plan.feasible, plan.plan_s)
+        fuse(i, plan.status, plan.feasible, plan.plan_s, events)
         outcome = stop.outcome(views) if stop is not None else None
         if outcome is not None:
             break
     if outcome is None:
         outcome = "max_views" if any(v.measured for v in views) else "never_detected"
     return EpisodeResult(prior, tuple(views), time.perf_counter() - t0, outcome)
+
+
+def _plan_or_hold(
+    planner: Planner, belief: Belief, p_world_camera: np.ndarray, iteration: int
+) -> tuple[ViewPlan, list[str]]:
+    """The planner's plan, or (when it fails) a fallback that holds the camera in place."""
+    t0 = time.perf_counter()
+    try:
+        plan = planner.plan(belief, p_world_camera, iteration)
+        if np.all(np.isfinite(plan.p_world_camera)) and np.all(np.isfinite(plan.p_world_target)):
+            return plan, []
+        reason = "non-finite viewpoint"
+    except (BveError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        reason = f"{type(exc).__name__}: {exc}"
+    hold = ViewPlan(
+        np.asarray(p_world_camera, dtype=float).copy(), belief.mean.copy(), "fallback", False,
+        float("nan"), plan_s=time.perf_counter() - t0,
+    )  # fmt: skip
+    return hold, [f"planner_failed: {reason}"]
+
+
+def _reopen(
+    mean: np.ndarray, cov: np.ndarray, rejected: list[Observation], gate: float | None
+) -> Belief | None:
+    """The belief from ``mean`` with the prior's covariance ``cov`` and every measurement in
+    ``rejected`` fused, if they all pass the gate (they agree with each other: the old
+    belief was wrong); None when any is rejected (they are outliers, not a consistent view
+    of the fruit)."""
+    belief = Belief(mean, cov)
+    for obs in rejected:
+        result = update(belief, obs.z, obs.model, gate)
+        if not result.accepted:
+            return None
+        belief = result.belief
+    return belief

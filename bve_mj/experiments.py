@@ -21,12 +21,13 @@ from bve_mj.config import LossName, ProtocolConfig, Settings, settings_to_dict
 from bve_mj.episode import EpisodeResult, run_episode
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.belief import Belief
+from bve_mj.faults import FaultyPlanner, FaultyWorld
 from bve_mj.metrics import consistency_metrics, euclidean_metrics, paper_metrics
 from bve_mj.planning import Planner, make_planner
 from bve_mj.planning.constraints import ConstraintName
 from bve_mj.robot import arm_kinematics, get_robot, make_arm_planner
 from bve_mj.sim.synthetic import SyntheticWorld
-from bve_mj.sim.world import Scenario
+from bve_mj.sim.world import Scenario, World
 
 __all__ = [
     "EXPERIMENTS",
@@ -158,7 +159,7 @@ def synthetic_episode(
     not at the protocol's random start (which the arm cannot reach); fruit, initial
     estimate and noise are the same draws as every other experiment's run ``run``.
     """
-    scenario_ss, noise_ss, planner_ss = np.random.SeedSequence(seed, spawn_key=(run,)).spawn(3)
+    scenario_ss, noise_ss, planner_ss, fault_ss = np.random.SeedSequence(seed, spawn_key=(run,)).spawn(4)
     scenario = sample_scenario(settings.protocol, np.random.default_rng(scenario_ss))
     planner_rng = np.random.default_rng(planner_ss)
     planner: Planner
@@ -171,7 +172,11 @@ def synthetic_episode(
         )
     else:
         planner = make_planner(settings, experiment.loss, experiment.constraints, planner_rng)
-    world = SyntheticWorld(settings, scenario, np.random.default_rng(noise_ss))
+    world: World = SyntheticWorld(settings, scenario, np.random.default_rng(noise_ss))
+    if settings.faults.any:
+        fault_rng = np.random.default_rng(fault_ss)
+        world = FaultyWorld(world, settings.faults, fault_rng)
+        planner = FaultyPlanner(planner, settings.faults.planner_failure_p, fault_rng)
     prior = Belief.isotropic(scenario.initial_estimate, settings.filter.initial_sigma_m)
     return scenario, run_episode(world, planner, prior, settings.filter, settings.protocol.steps)
 

@@ -19,10 +19,13 @@ from bve_mj.episode import EpisodeResult, StopRules, ViewRecord, run_episode
 from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
 from bve_mj.experiments import EXPERIMENTS, with_overrides
+from bve_mj.faults import FaultyPlanner, FaultyWorld
 from bve_mj.planning.constraints import ConstraintName
+from bve_mj.planning.plan import Planner
 from bve_mj.robot import ArmKinematics, arm_kinematics, look_at_ik, make_arm_planner
 from bve_mj.sim.mujoco_world import MujocoWorld
 from bve_mj.sim.scene import Fruit, SceneInfo, build_scene
+from bve_mj.sim.world import World
 
 __all__ = ["MujocoEpisode", "Recorder", "episode_settings", "run_mujoco_episode"]
 
@@ -43,7 +46,8 @@ def episode_settings(settings: Settings) -> Settings:
     The distance band and step limit take the episode's values (adapted to the arm's
     reach); Σc is taken at the band distance; approach mode turns the eq. 13 term on
     (a = 1, b = 4 unless set), drops the band and moves the plant wall to
-    ``approach_wall_distance_m`` in front of the fruit.
+    ``approach_wall_distance_m`` in front of the fruit. The EKF gates measurements at
+    ``episode.gate_probability`` unless ``filter.gate_probability`` is set.
     """
     ep = settings.episode
     planner: dict[str, object] = {}
@@ -56,11 +60,13 @@ def episode_settings(settings: Settings) -> Settings:
         constraints["wall_distance_m"] = ep.approach_wall_distance_m
         if settings.planner.approach_aggressiveness == 0.0:
             planner = {"approach_aggressiveness": 1.0, "approach_set_point": 4.0}
+    gate = settings.filter.gate_probability
     return with_overrides(
         settings,
         constraints=constraints,
         measurement={"reference_range_m": ep.band_distance_m},
         planner=planner,
+        filter={"gate_probability": ep.gate_probability if gate is None else gate},
     )
 
 
@@ -95,6 +101,7 @@ class MujocoEpisode:
                     "measured": v.measured,
                     "accepted": v.accepted,
                     "nis": None if math.isnan(v.nis) else v.nis,
+                    "events": list(v.events),
                     "estimate_m": v.belief.mean.tolist(),
                     "covariance_m2": v.belief.cov.tolist(),
                     "error_mm": 1e3 * float(np.linalg.norm(v.belief.mean - self.truth)),
@@ -154,7 +161,7 @@ def run_mujoco_episode(
     """
     s = episode_settings(settings)
     ep = s.episode
-    scene_ss, prior_ss, sensor_ss, planner_ss = np.random.SeedSequence(seed).spawn(4)
+    scene_ss, prior_ss, sensor_ss, planner_ss, fault_ss = np.random.SeedSequence(seed).spawn(5)
     kin = arm_kinematics(s.robot.name, s.robot.joint_limits)
     spec, info = build_scene(
         kin, s.scene, np.random.default_rng(scene_ss), s.camera,
@@ -167,7 +174,10 @@ def run_mujoco_episode(
     truth = info.target.centre_m
     mean = truth + prior_rng.uniform(-ep.initial_error_m, ep.initial_error_m, 3)
     prior = Belief.isotropic(mean, max(ep.initial_error_m / math.sqrt(3.0), 1e-3))
-    q_start = _start_configuration(kin, mean, ep.band_distance_m, prior_rng)
+    try:
+        q_start = _start_configuration(kin, mean, ep.band_distance_m, prior_rng)
+    except PlanningError:  # the fruit is out of the arm's reach: a clear outcome, not a crash
+        return MujocoEpisode(EpisodeResult(prior, (), 0.0, "unreachable"), info, s, seed, kin.home.copy())
     world = MujocoWorld(
         s, kin, model, info, q_start, mean, np.random.default_rng(sensor_ss),
         keep_images=recorder is not None,
@@ -181,7 +191,14 @@ def run_mujoco_episode(
         names = (*names, "band")
     if ep.approach:
         names = tuple(n for n in names if n != "band")
-    planner = make_arm_planner(s, experiment.loss, names, kin, q_start, np.random.default_rng(planner_ss))
+    planner: Planner = make_arm_planner(
+        s, experiment.loss, names, kin, q_start, np.random.default_rng(planner_ss)
+    )
+    loop_world: World = world
+    if s.faults.any:
+        fault_rng = np.random.default_rng(fault_ss)
+        loop_world = FaultyWorld(world, s.faults, fault_rng)
+        planner = FaultyPlanner(planner, s.faults.planner_failure_p, fault_rng)
     stop = (
         StopRules(approach_distance_m=ep.approach_distance_m)
         if ep.approach
@@ -189,7 +206,7 @@ def run_mujoco_episode(
     )
     try:
         on_view = None if recorder is None else recorder.on_view
-        result = run_episode(world, planner, prior, s.filter, ep.views, stop, on_view)
+        result = run_episode(loop_world, planner, prior, s.filter, ep.views, stop, on_view)
     finally:
         world.close()
     return MujocoEpisode(result, info, s, seed, q_start)

@@ -11,11 +11,13 @@ from bve_mj.estimation.belief import Belief
 
 __all__ = ["PlanStatus", "Planner", "ViewPlan"]
 
-PlanStatus = Literal["optimal", "best_feasible", "restoring"]
+PlanStatus = Literal["optimal", "best_feasible", "restoring", "fallback"]
 """optimal: the optimiser converged on a feasible point. best_feasible: it did not converge
 (or left the feasible set) and the best feasible point found is returned. restoring: no
 point within the step limit satisfies the task constraints; the returned point is the one
-that violates them least (it always satisfies the step limit)."""
+that violates them least (it always satisfies the step limit). fallback: the planner
+failed (raised, or returned a non-finite point); the episode loop holds the camera where it
+is, looking at the estimate."""
 
 
 @dataclass(frozen=True)
@@ -46,7 +48,12 @@ class ViewPlan:
 
 
 class Planner(Protocol):
-    """Chooses the next camera position from the belief and the current camera position."""
+    """Chooses the next camera position from the belief and the current camera position.
+
+    A planner for an arm may also offer ``set_configuration(q)``: the episode loop then
+    tells it the joint angles the encoders measured after each move (the arm may not be
+    where the last plan put it: tracking error, a failed IK, a fallback).
+    """
 
     def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
         """The next viewpoint; ``iteration`` counts planned views from 1."""

@@ -38,7 +38,16 @@ class ArmKinematics:
 
     def __init__(self, robot: RobotDescription, limit_set: str = "urdf") -> None:
         self.robot = robot
-        full = pin.buildModelFromUrdf(str(robot.urdf_path))
+        path = robot.urdf_path
+        if not path.is_file():
+            raise ConfigError(
+                "robot.urdf", str(path), "an existing URDF file (reinstall bve_mj or the robot data)"
+            )
+        try:
+            full = pin.buildModelFromUrdf(str(path))
+        except (RuntimeError, ValueError) as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise ConfigError("robot.urdf", str(path), f"a valid URDF file ({first})") from None
         missing = [j for j in robot.arm_joints if not full.existJointName(j)]
         if missing:
             raise ConfigError("robot.arm_joints", missing, f"joints of {robot.urdf_path.name}")

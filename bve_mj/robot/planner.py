@@ -145,6 +145,12 @@ class KinematicBvePlanner:
     def _reachability(self, k_hat: np.ndarray) -> list[Constraint]:
         return [Reachability(self.kin, k_hat, self.q)]
 
+    def set_configuration(self, q: np.ndarray) -> None:
+        """Plan the next move from ``q`` (the encoders' reading), not from the last plan's."""
+        q = np.asarray(q, dtype=float)
+        if q.shape == self.q.shape and np.all(np.isfinite(q)):
+            self.q = self.kin.clip(q)
+
     # ------------------------------------------------------------------ plan
     def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
         t0 = time.perf_counter()

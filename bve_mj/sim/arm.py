@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 
 from bve_mj.config import CameraConfig
+from bve_mj.errors import ConfigError
 from bve_mj.robot.kinematics import ArmKinematics
 
 __all__ = ["CAMERA_NAME", "CAMERA_SITE", "R_OPTICAL_MUJOCO", "ArmModel", "arm_spec", "urdf_for_mujoco"]
@@ -40,7 +41,10 @@ _DAMPING = 1.0
 
 def urdf_for_mujoco(kin: ArmKinematics) -> str:
     """The arm's URDF as MuJoCo can read it: meshes resolved, DAE visuals dropped."""
-    root = ET.parse(kin.robot.urdf_path).getroot()
+    try:
+        root = ET.parse(kin.robot.urdf_path).getroot()
+    except (OSError, ET.ParseError) as exc:
+        raise ConfigError("robot.urdf", str(kin.robot.urdf_path), f"a readable URDF file ({exc})") from None
     for tag in ("gazebo", "transmission"):
         for el in root.findall(tag):
             root.remove(el)
@@ -85,7 +89,10 @@ class ArmModel:
 def arm_spec(kin: ArmKinematics, camera: CameraConfig | None = None) -> mujoco.MjSpec:
     """MjSpec of ``kin``'s arm with camera, site, actuators, classes and ``home`` keyframe."""
     camera = camera or CameraConfig()
-    spec = mujoco.MjSpec.from_string(urdf_for_mujoco(kin))
+    try:
+        spec = mujoco.MjSpec.from_string(urdf_for_mujoco(kin))
+    except ValueError as exc:  # MuJoCo's parser: a URDF Pinocchio accepted but MuJoCo cannot read
+        raise ConfigError("robot.urdf", str(kin.robot.urdf_path), f"a URDF MuJoCo can read ({exc})") from None
     spec.modelname = kin.robot.name
     spec.compiler.autolimits = True
 

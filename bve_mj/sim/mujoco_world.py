@@ -142,6 +142,17 @@ class MujocoWorld:
         q = self.last.q_encoders if self.last.q_encoders is not None else self.q
         return self.kin.camera_pose(q)[0]
 
+    @property
+    def q_measured(self) -> np.ndarray | None:
+        """The joint angles the encoders read at the last view [rad] (None before one)."""
+        return None if self.last.q_encoders is None else self.last.q_encoders.copy()
+
+    def hold(self, plan: ViewPlan) -> None:
+        """A move whose IK failed: the arm stays where it is (holding its position); the
+        camera's next target is the plan's."""
+        self.last = _Last(ik_failed=True)
+        self._target = np.asarray(plan.p_world_target, dtype=float).copy()
+
     # ------------------------------------------------------------------ World
     def move_camera(self, plan: ViewPlan) -> None:
         self.last = _Last()

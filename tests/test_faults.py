@@ -1,0 +1,205 @@
+"""Robustness: validated settings and model files, missed / false / outlier measurements,
+planner and IK failures, NaN guards, clear outcomes, and the fault-injection suite."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bve_mj.campaign import CampaignSpec, run_campaign
+from bve_mj.cli import main
+from bve_mj.config import _SECTIONS, FaultConfig, Settings, load_settings, settings_from_dict
+from bve_mj.episode import run_episode
+from bve_mj.errors import ConfigError, EstimationError
+from bve_mj.estimation.belief import Belief
+from bve_mj.experiments import EXPERIMENTS, sample_scenario, with_overrides
+from bve_mj.faults import FaultyPlanner, FaultyWorld
+from bve_mj.planning import make_planner
+from bve_mj.robot.description import ROBOTS
+from bve_mj.robot.kinematics import ArmKinematics
+from bve_mj.sim.synthetic import SyntheticWorld
+from bve_mj.sim.world import Observation
+
+REPO = Path(__file__).resolve().parents[1]
+BAD_VALUES = ["x", [1, 2], {"a": 1}, float("nan"), float("inf"), -1e9, True]
+
+
+@pytest.mark.parametrize("section", list(_SECTIONS))
+def test_every_setting_rejects_wrong_types_and_ranges_by_name(section: str) -> None:
+    """Each field of each section, given values of the wrong type or range: a ConfigError
+    naming the field, never another exception (pairs and lists may legitimately take [1, 2])."""
+    cls = _SECTIONS[section]
+    for f in dataclasses.fields(cls):
+        rejected = 0
+        for bad in BAD_VALUES:
+            try:
+                settings_from_dict({section: {f.name: bad}})
+            except ConfigError as exc:
+                assert exc.field.startswith(section), (f.name, bad, exc.field)
+                rejected += 1
+        assert rejected >= len(BAD_VALUES) - 2, f"{section}.{f.name} accepts too much"
+
+
+def test_unknown_keys_suggest_and_cli_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = tmp_path / "s.toml"
+    cfg.write_text("[faults]\ndrop_pp = 0.3\n")
+    with pytest.raises(ConfigError, match="did you mean 'drop_p'"):
+        load_settings(cfg)
+    bad_files = ("[faults]\ndrop_p = 1.5\n", "[episode]\nexperiment = 5\n",
+                 "[scene]\nfruit_radius_m = [1, 2]\n", "not toml [")  # fmt: skip
+    for text in bad_files:
+        cfg.write_text(text)
+        assert main(["episode", "--config", str(cfg), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "error:" in err, err
+
+
+@pytest.mark.parametrize(("content", "reason"), [("<robot name='x'><link", "valid URDF"), (None, "existing")])
+def test_corrupt_or_missing_model_files_are_named(tmp_path: Path, content: str | None, reason: str) -> None:
+    urdf = tmp_path / "arm.urdf"
+    if content is not None:
+        urdf.write_text(content)
+    robot = dataclasses.replace(ROBOTS["manipulator_h"], urdf=str(urdf))
+    with pytest.raises(ConfigError, match=rf"robot\.urdf: .*{reason}"):
+        ArmKinematics(robot)
+
+
+# --------------------------------------------------------------------------- the loop, synthetic
+GATED = with_overrides(
+    Settings(), measurement={"kind": "camera"}, filter={"gate_probability": 0.999}, protocol={"steps": 20}
+)
+
+
+def _episode(settings: Settings, run: int, wrap=None):  # type: ignore[no-untyped-def]
+    rng = np.random.default_rng(run)
+    scenario = sample_scenario(settings.protocol, rng)
+    world = SyntheticWorld(settings, scenario, rng)
+    planner = make_planner(settings, "dispersion", EXPERIMENTS["E1"].constraints, rng)
+    loop_world = wrap(world) if wrap else FaultyWorld(world, settings.faults, np.random.default_rng(run + 1))
+    prior = Belief.isotropic(scenario.initial_estimate, settings.filter.initial_sigma_m)
+    result = run_episode(loop_world, planner, prior, settings.filter, settings.protocol.steps)
+    return scenario, result
+
+
+def test_fruit_hidden_for_several_views_holds_then_recovers() -> None:
+    s = dataclasses.replace(GATED, faults=FaultConfig(hidden_views=(0, 1, 2, 3, 4)))
+    for run in range(5):
+        scenario, result = _episode(s, run)
+        hidden = result.views[:5]
+        assert all(not v.measured and "dropped" in v.events for v in hidden)
+        assert all(np.array_equal(v.belief.mean, result.prior.mean) for v in hidden)  # bounded: unchanged
+        assert np.linalg.norm(result.final.mean - scenario.p_world_fruit) < 10e-3
+        assert result.final.mahalanobis_sq(scenario.p_world_fruit) < 16.3  # inside the 99.9% ellipsoid
+
+
+class _FalseFirst:
+    """Measures a point 20 cm off the fruit on views 0 and 1 (a red leaf), the fruit after."""
+
+    def __init__(self, world: SyntheticWorld) -> None:
+        self.world, self.view = world, 0
+
+    def __getattr__(self, name: str):  # type: ignore[no-untyped-def]
+        return getattr(self.world, name)
+
+    def observe(self) -> Observation | None:
+        obs = self.world.observe()
+        self.view += 1
+        if obs is not None and self.view <= 2:
+            fake = self.world.p_world_fruit + np.array([0.0, 0.2, 0.0])
+            return Observation(obs.model.predict(fake), obs.model)
+        return obs
+
+
+def test_early_false_detection_is_recovered_by_the_belief_reset() -> None:
+    for run in range(5):
+        scenario, result = _episode(GATED, run, _FalseFirst)
+        events = [e for v in result.views for e in v.events]
+        assert "belief_reset" in events
+        assert np.linalg.norm(result.final.mean - scenario.p_world_fruit) < 5e-3
+
+
+def test_outliers_and_false_detections_are_gated() -> None:
+    s = dataclasses.replace(GATED, faults=FaultConfig(outlier_p=0.2, false_p=0.1, drop_p=0.3))
+    injected = gated = 0
+    for run in range(10):
+        scenario, result = _episode(s, run)
+        for v in result.views[2:]:  # once the belief is narrow, a gross error must not pass
+            if {"outlier", "false_detection"} & set(v.events):
+                injected += 1
+                gated += not v.accepted
+        assert np.linalg.norm(result.final.mean - scenario.p_world_fruit) < 10e-3
+    assert injected >= 10 and gated >= 0.8 * injected
+
+
+def test_planner_failures_fall_back_to_holding() -> None:
+    s = dataclasses.replace(GATED, faults=FaultConfig(planner_failure_p=1.0))
+    rng = np.random.default_rng(0)
+    scenario = sample_scenario(s.protocol, rng)
+    world = SyntheticWorld(s, scenario, rng)
+    planner = FaultyPlanner(make_planner(s, "dispersion", ("band",), rng), 1.0, rng)
+    result = run_episode(world, planner, Belief.isotropic(scenario.initial_estimate, 0.1), s.filter, 5)
+    assert [v.plan_status for v in result.views[1:]] == ["fallback"] * 5
+    assert all(np.allclose(v.p_world_camera, scenario.p_world_camera_start) for v in result.views)
+    assert all(v.events and v.events[0].startswith("planner_failed") for v in result.views[1:])
+
+
+def test_nan_never_enters_the_belief_and_the_step_is_named() -> None:
+    class NanAtView2(_FalseFirst):
+        def observe(self) -> Observation | None:
+            obs = self.world.observe()
+            self.view += 1
+            if obs is not None and self.view == 3:
+                return Observation(np.full_like(obs.z, np.nan), obs.model)
+            return obs
+
+    with pytest.raises(EstimationError, match=r"view 2: .*NaN"):
+        _episode(GATED, 0, NanAtView2)
+
+
+# --------------------------------------------------------------------------- outcomes, MuJoCo
+def test_out_of_reach_and_never_visible_are_outcomes_with_exit_3(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    far = tmp_path / "far.toml"
+    far.write_text("[scene]\nrow_x_m = 2.5\ntarget_x_m = [2.2, 2.3]\n")
+    blind = tmp_path / "blind.toml"
+    blind.write_text("[detector]\nmin_area_px = 1000000\n")
+    assert main(["episode", "--config", str(far), "--quiet", "--json", str(tmp_path / "far.json")]) == 3
+    assert "outcome: unreachable" in capsys.readouterr().out
+    assert main(["episode", "--config", str(blind), "--quiet", "--views", "2"]) == 3
+    assert "outcome: never_detected" in capsys.readouterr().out
+
+
+# --------------------------------------------------------------------------- the suite
+def test_fault_injection_suite_200_mujoco_episodes(tmp_path: Path) -> None:
+    """200 short seeded MuJoCo episodes with the faults of examples/scenarios/faults.toml."""
+    settings = load_settings(REPO / "examples" / "scenarios" / "faults.toml")
+    assert settings.faults.drop_p == 0.3 and settings.sensor.encoder_noise_rad > 0
+    spec = CampaignSpec(experiments=("E1", "E5"), worlds=("mujoco",), measurements=("camera",), runs=100)
+    result = run_campaign(settings, spec, tmp_path, workers=2)
+    rows = result.rows
+    assert len(rows) == 200
+    assert not result.crashed, result.crashed[:3]
+    outcomes = {r["outcome"] for r in rows}
+    assert outcomes <= {"converged", "stable", "max_views", "never_detected"}, outcomes
+    assert all(r["belief_finite"] for r in rows)
+    assert max(r["joint_limit_violation_rad"] for r in rows) <= 1e-3
+    radius = max(settings.scene.fruit_radius_m)
+    assert min(r["min_camera_fruit_distance_m"] for r in rows) > radius
+    errors = np.array([r["error_mm"] for r in rows])
+    initial_bound_mm = 1e3 * settings.episode.initial_error_m * np.sqrt(3.0)
+    assert errors.max() <= initial_bound_mm  # bounded: never worse than the prior's worst case
+    assert np.median(errors) < 2.0
+    counts: dict[str, int] = {}
+    for r in rows:
+        for k, n in r["events"].items():
+            counts[k] = counts.get(k, 0) + n
+    for kind in ("dropped", "false_detection", "outlier", "ik_failure", "planner_failed"):
+        assert counts.get(kind, 0) > 0, (kind, counts)
+    by_outcome = {o: sum(r["outcome"] == o for r in rows) for o in sorted(outcomes)}
+    print(f"\nfault suite: {len(rows)} episodes, events {counts}, outcomes {by_outcome}, final error "
+          f"median {np.median(errors):.2f} mm, p95 {np.percentile(errors, 95):.2f} mm, "
+          f"max {errors.max():.2f} mm")  # fmt: skip
