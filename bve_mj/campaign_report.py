@@ -209,7 +209,8 @@ def plot_campaign(result: CampaignResult) -> list[Path]:
     ax.set_ylabel("‖estimate - truth‖ [mm], median and IQR")
     ax.set_title(f"error against views ({result.spec.runs} runs a cell, seed {result.spec.seed})", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     _save(fig, d / "error_by_view.png")
     written.append(d / "error_by_view.png")

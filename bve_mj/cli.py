@@ -589,7 +589,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"bve-mj: failed: {exc}", file=sys.stderr)
         return EXIT_FAILURE
     except KeyboardInterrupt:
-        print("bve-mj: interrupted", file=sys.stderr)
+        print(
+            "bve-mj: interrupted (a campaign keeps every finished run: the same command resumes it)",
+            file=sys.stderr,
+        )
         return 130
     except Exception as exc:  # internal failure: one line, exit 1 (BVE_MJ_DEBUG=1 for the traceback)
         if os.environ.get("BVE_MJ_DEBUG"):

@@ -203,3 +203,50 @@ def test_fault_injection_suite_200_mujoco_episodes(tmp_path: Path) -> None:
     print(f"\nfault suite: {len(rows)} episodes, events {counts}, outcomes {by_outcome}, final error "
           f"median {np.median(errors):.2f} mm, p95 {np.percentile(errors, 95):.2f} mm, "
           f"max {errors.max():.2f} mm")  # fmt: skip
+
+
+@pytest.mark.parametrize("kind", ["second_red_fruit", "red_leaf"])
+def test_a_second_red_blob_in_the_rendered_scene_does_not_capture_the_estimate(kind: str) -> None:
+    import mujoco
+
+    from bve_mj.mujoco_episode import run_mujoco_episode
+    from bve_mj.sim.scene import Fruit
+
+    target = Fruit("target", np.array([0.42, 0.0, 0.2]), 0.033, "red")
+    settings = with_overrides(Settings(), measurement={"kind": "camera"}, episode={"views": 10})
+    others: tuple[Fruit, ...] = ()
+    edit = None
+    if kind == "second_red_fruit":
+        others = (Fruit("ripe_neighbour", np.array([0.43, 0.085, 0.17]), 0.035, "red"),)
+    else:
+
+        def edit(spec: mujoco.MjSpec) -> None:  # a reddish leaf hanging beside the fruit
+            spec.worldbody.add_geom(
+                name="red_leaf", type=mujoco.mjtGeom.mjGEOM_ELLIPSOID, size=[0.003, 0.03, 0.05],
+                pos=target.centre_m + np.array([-0.03, -0.07, 0.02]), rgba=[0.75, 0.08, 0.05, 1.0],
+                contype=0, conaffinity=0, group=1,
+            )  # fmt: skip
+
+    import cv2
+
+    from bve_mj.config import DetectorConfig
+    from bve_mj.perception.detector import red_mask
+
+    class CountRedBlobs:  # a recorder that checks the second red blob is really in view
+        def attach(self, world, prior):  # type: ignore[no-untyped-def]
+            self.world, self.counts = world, []
+
+        def on_step(self, sim_time: float) -> None:
+            pass
+
+        def on_view(self, record) -> None:  # type: ignore[no-untyped-def]
+            n, _, stats, _ = cv2.connectedComponentsWithStats(
+                red_mask(self.world.last.image, DetectorConfig())
+            )
+            self.counts.append(sum(stats[i, cv2.CC_STAT_AREA] >= 25 for i in range(1, n)))
+
+    for seed in (0, 1):
+        rec = CountRedBlobs()
+        ep = run_mujoco_episode(settings, seed, target=target, distractors=others, edit=edit, recorder=rec)
+        assert max(rec.counts) >= 2, rec.counts
+        assert ep.final_error_mm < 10.0, (kind, seed, ep.final_error_mm, ep.result.outcome)
