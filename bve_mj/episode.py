@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -129,15 +130,14 @@ def run_episode(
                 if result.accepted:
                     rejected.clear()
                 else:
+                    n = filter_config.reset_after_rejections
                     rejected.append(obs)
-                    if len(rejected) >= filter_config.reset_after_rejections:
-                        reset = _reopen(belief.mean, prior.cov, rejected, gate)
-                        if reset is not None:  # the belief had locked onto something wrong
-                            events.append("belief_reset")
-                            result = dataclasses.replace(result, belief=reset, accepted=True)
-                            rejected.clear()
-                        else:  # the rejected ones disagree among themselves: outliers
-                            rejected.pop(0)
+                    del rejected[: -2 * n]  # the last 2n rejected measurements
+                    reset = _reopen(belief.mean, prior.cov, rejected, n, gate)
+                    if reset is not None:  # the belief had locked onto something wrong
+                        events.append("belief_reset")
+                        result = dataclasses.replace(result, belief=reset, accepted=True)
+                        rejected.clear()
             except EstimationError as exc:
                 raise EstimationError(f"view {i}: {exc}; the episode stops here") from None
             belief, accepted, nis = result.belief, result.accepted, result.nis
@@ -193,16 +193,23 @@ def _plan_or_hold(
 
 
 def _reopen(
-    mean: np.ndarray, cov: np.ndarray, rejected: list[Observation], gate: float | None
+    mean: np.ndarray, cov: np.ndarray, rejected: list[Observation], n: int, gate: float | None
 ) -> Belief | None:
-    """The belief from ``mean`` with the prior's covariance ``cov`` and every measurement in
-    ``rejected`` fused, if they all pass the gate (they agree with each other: the old
-    belief was wrong); None when any is rejected (they are outliers, not a consistent view
-    of the fruit)."""
-    belief = Belief(mean, cov)
-    for obs in rejected:
-        result = update(belief, obs.z, obs.model, gate)
-        if not result.accepted:
-            return None
-        belief = result.belief
-    return belief
+    """A belief reopened at ``mean`` with the prior's covariance ``cov`` and ``n`` of the
+    ``rejected`` measurements fused (the newest such set), if some ``n`` of them, the newest
+    among them, pass the gate one after another: they agree with each other, so the old
+    belief was wrong. None when no such set exists (outliers and false detections do not
+    agree with each other)."""
+    if len(rejected) < n:
+        return None
+    newest = rejected[-1]
+    for others in itertools.combinations(reversed(rejected[:-1]), n - 1):
+        belief = Belief(mean, cov)
+        for obs in (*reversed(others), newest):
+            result = update(belief, obs.z, obs.model, gate)
+            if not result.accepted:
+                break
+            belief = result.belief
+        else:
+            return belief
+    return None

@@ -175,7 +175,11 @@ def test_out_of_reach_and_never_visible_are_outcomes_with_exit_3(
 
 # --------------------------------------------------------------------------- the suite
 def test_fault_injection_suite_200_mujoco_episodes(tmp_path: Path) -> None:
-    """200 short seeded MuJoCo episodes with the faults of examples/scenarios/faults.toml."""
+    """200 short seeded MuJoCo episodes with the faults of examples/scenarios/faults.toml.
+
+    The few large errors left (max ~68 mm, under the prior's worst case) are the unknown fruit
+    radius: a fruit 16-29% smaller than the prior's biases every range alike, and holds after
+    injected failures repeat one viewing direction."""
     settings = load_settings(REPO / "examples" / "scenarios" / "faults.toml")
     assert settings.faults.drop_p == 0.3 and settings.sensor.encoder_noise_rad > 0
     spec = CampaignSpec(experiments=("E1", "E5"), worlds=("mujoco",), measurements=("camera",), runs=100)
@@ -192,7 +196,7 @@ def test_fault_injection_suite_200_mujoco_episodes(tmp_path: Path) -> None:
     errors = np.array([r["error_mm"] for r in rows])
     initial_bound_mm = 1e3 * settings.episode.initial_error_m * np.sqrt(3.0)
     assert errors.max() <= initial_bound_mm  # bounded: never worse than the prior's worst case
-    assert np.median(errors) < 2.0
+    assert np.median(errors) < 2.0 and np.percentile(errors, 95) < 5.0
     counts: dict[str, int] = {}
     for r in rows:
         for k, n in r["events"].items():
