@@ -359,26 +359,25 @@ def build_results_page(
         *_baseline_table(muj, "mujoco", "camera", options),
         "",
     ]
+
+    def figure(name: str, alt: str, caption: str) -> list[str]:
+        png = figures / name
+        return [f"![{alt}](results/{name})", "", f"*{caption}*", ""] if png.exists() else []
+
     for label in ("synthetic", "mujoco"):
-        png = figures / f"{label}_{focus}_error_by_view.png"
-        if png.exists():
-            md += [
-                f"![error against views, {label} {focus}](results/{png.name})",
-                "",
-                f"*Median and IQR of the error after each view, {label} world, {focus}, every planner "
-                f"and measurement: from `{cmds[label]}`.*",
-                "",
-            ]
+        md += figure(
+            f"{label}_{focus}_error_by_view.png",
+            f"error against views, {label} {focus}",
+            f"Median and IQR of the error after each view, {label} world, {focus}, every planner "
+            f"and measurement: from `{cmds[label]}`.",
+        )
     md += ["## 4. Sample paths", ""]
     for label in ("synthetic", "mujoco"):
-        png = figures / f"{label}_{focus}_sample_paths.png"
-        if png.exists():
-            md += [
-                f"![sample paths, {label} {focus}](results/{png.name})",
-                "",
-                f"*Run 0 of {focus} for each planner and measurement, {label} world: camera positions "
-                f"light to dark blue in time, the estimate green, the true fruit red. From `{cmds[label]}`.*",
-                "",
-            ]
+        md += figure(
+            f"{label}_{focus}_sample_paths.png",
+            f"sample paths, {label} {focus}",
+            f"Run 0 of {focus} for each planner and measurement, {label} world: camera positions "
+            f"light to dark blue in time, the estimate green, the true fruit red. From `{cmds[label]}`.",
+        )
     written.append(write_text_atomic(out_md, "\n".join(md)))
     return written
