@@ -496,6 +496,8 @@ def run_campaign(
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ConfigError("out", str(out), f"a directory that can be created ({exc.strerror})") from None
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise ConfigError("out", str(out), "a writable directory")
     settings = for_robot(settings)
     cells = spec.cells(settings)
     t0 = time.perf_counter()
