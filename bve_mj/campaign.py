@@ -18,6 +18,7 @@ processes or machines.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import multiprocessing
@@ -229,11 +230,6 @@ def _row(
     d = final.mean - truth
     planned = result.views[1:]
     errors = [float(np.linalg.norm(v.belief.mean - truth)) * 1e3 for v in result.views]
-    events: dict[str, int] = {}
-    for v in result.views:
-        for e in v.events:
-            key = e.split(":")[0]
-            events[key] = events.get(key, 0) + 1
     finite = all(
         np.all(np.isfinite(v.belief.mean)) and np.all(np.isfinite(v.belief.cov)) for v in result.views
     )
@@ -257,7 +253,7 @@ def _row(
         "plan_ms_median": float(np.median([v.plan_s for v in planned])) * 1e3 if planned else 0.0,
         "restoring_steps": sum(v.plan_status == "restoring" for v in planned),
         "fallback_steps": sum(v.plan_status == "fallback" for v in planned),
-        "events": events,
+        "events": result.event_counts(),
         "belief_finite": bool(finite),
         "joint_limit_violation_rad": joint_violation_rad,
         "min_camera_fruit_distance_m": min(
@@ -455,9 +451,14 @@ class CampaignResult:
     wall_s: float
     directory: Path
 
+    @functools.cached_property
+    def _by_key(self) -> dict[str, dict[str, Any]]:
+        return {r["key"]: r for r in self.rows}
+
     def cell_rows(self, cell: Cell) -> list[dict[str, Any]]:
-        keys = {cell.key(r) for r in range(self.spec.runs)}
-        return [r for r in self.rows if r["key"] in keys]
+        """The cell's finished runs, in run order."""
+        by_key = self._by_key
+        return [by_key[k] for k in (cell.key(r) for r in range(self.spec.runs)) if k in by_key]
 
 
 def _chunks(items: list[tuple[Cell, int]], workers: int) -> list[tuple[tuple[Cell, int], ...]]:

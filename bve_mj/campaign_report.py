@@ -178,14 +178,20 @@ def _varying(cells: Sequence[Cell]) -> list[str]:
     return [k for k in keys if len({getattr(c, k) for c in cells}) > 1]
 
 
-def plot_campaign(result: CampaignResult) -> list[Path]:
+def plot_campaign(
+    result: CampaignResult,
+    cells: Sequence[Cell] | None = None,
+    directory: Path | None = None,
+    prefix: str = "",
+) -> list[Path]:
     """``error_by_view.png`` always; ``recoverability.png`` when the initial error varies;
-    ``sample_paths.png``: run 0 of up to six cells."""
+    ``sample_paths.png``: run 0 of up to six cells. Of ``cells`` (default: all), in
+    ``directory`` (default: the campaign's), each name preceded by ``prefix``."""
     from bve_mj.plots import _pyplot, _save, draw_path
 
     plt = _pyplot()
-    d = result.directory
-    cells = list(result.cells)
+    d = result.directory if directory is None else directory
+    cells = list(result.cells if cells is None else cells)
     varying = _varying(cells)
     written = []
     groups: dict[tuple[Any, ...], list[Cell]] = {}
@@ -212,8 +218,8 @@ def plot_campaign(result: CampaignResult) -> list[Path]:
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    _save(fig, d / "error_by_view.png")
-    written.append(d / "error_by_view.png")
+    written.append(d / f"{prefix}error_by_view.png")
+    _save(fig, written[-1])
 
     groups = {k: g for k, g in groups.items() if len(g) > 1}
     if groups:
@@ -248,8 +254,8 @@ def plot_campaign(result: CampaignResult) -> list[Path]:
             fontsize=10,
         )
         fig.tight_layout()
-        _save(fig, d / "recoverability.png")
-        written.append(d / "recoverability.png")
+        written.append(d / f"{prefix}recoverability.png")
+        _save(fig, written[-1])
 
     shown = [c for c in curve_cells if result.cell_rows(c) and "camera_path_m" in result.cell_rows(c)[0]][:6]
     if shown:
@@ -268,6 +274,6 @@ def plot_campaign(result: CampaignResult) -> list[Path]:
                 legend=i == 0,
             )
         fig.tight_layout()
-        _save(fig, d / "sample_paths.png")
-        written.append(d / "sample_paths.png")
+        written.append(d / f"{prefix}sample_paths.png")
+        _save(fig, written[-1])
     return written

@@ -319,12 +319,9 @@ def _cmd_episode(args: argparse.Namespace) -> int:
         raise ConfigError("video", args.video, "a path ending in .mp4")
     plots_prefix = _check_output_path("plots", args.plots)
     if plots_prefix is not None:
-        try:
-            import matplotlib  # noqa: F401
-        except ImportError:
-            raise ConfigError(
-                "plots", args.plots, "matplotlib installed: pip install 'bve_mj[plots]'"
-            ) from None
+        from bve_mj.plots import require_matplotlib
+
+        require_matplotlib("plots", args.plots)
     settings = load_settings(args.config) if args.config else Settings()
     initial_error = _float_arg("initial-error", args.initial_error, 0.0)
     episode = {
@@ -390,11 +387,7 @@ def _cmd_episode(args: argparse.Namespace) -> int:
         f"IK {stage['ik_s']:.1f} ms, control {stage['control_s']:.1f} ms, "
         f"render {stage['render_s']:.1f} ms, detect {stage['detect_s']:.1f} ms"
     )
-    counts: dict[str, int] = {}
-    for rec in result.result.views:
-        for event in rec.events:
-            kind = event.split(":")[0]
-            counts[kind] = counts.get(kind, 0) + 1
+    counts = result.result.event_counts()
     if counts:
         print("events: " + ", ".join(f"{k} x{n}" for k, n in sorted(counts.items())))
     if doc["outcome"] == "unreachable":
@@ -447,18 +440,10 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         measurements = ",".join(dict.fromkeys("camera" if w == "mujoco" else "range" for w in names))
     else:
         measurements = args.measurements
-    if args.out and Path(args.out).exists() and not Path(args.out).is_dir():
-        from bve_mj.errors import ConfigError
+    if not args.no_plots:
+        from bve_mj.plots import require_matplotlib
 
-        raise ConfigError("out", args.out, "a directory (a file is there)")
-    if args.no_plots is False:
-        try:
-            import matplotlib  # noqa: F401
-        except ImportError:
-            from bve_mj.errors import ConfigError
-
-            allowed = "installed (pip install 'bve_mj[plots]'), or --no-plots"
-            raise ConfigError("plots", "matplotlib", allowed) from None
+        require_matplotlib(alternative=", or --no-plots")
     spec = CampaignSpec(
         experiments=experiments,
         worlds=tuple(worlds.split(",")),  # validated by CampaignSpec
@@ -533,10 +518,9 @@ def _cmd_results(args: argparse.Namespace) -> int:
     work = Path(args.work)
     if work.exists() and not work.is_dir():
         raise ConfigError("work", args.work, "a directory (a file is there)")
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        raise ConfigError("plots", "matplotlib", "installed: pip install 'bve_mj[plots]'") from None
+    from bve_mj.plots import require_matplotlib
+
+    require_matplotlib()
     show = not args.quiet and sys.stderr.isatty()
     t0 = time.perf_counter()
     written = build_results_page(

@@ -89,6 +89,15 @@ class EpisodeResult:
     def final(self) -> Belief:
         return self.views[-1].belief if self.views else self.prior
 
+    def event_counts(self) -> dict[str, int]:
+        """How often each kind of event (the text before any ``:``) happened, over all views."""
+        counts: dict[str, int] = {}
+        for v in self.views:
+            for event in v.events:
+                kind = event.split(":")[0]
+                counts[kind] = counts.get(kind, 0) + 1
+        return counts
+
 
 def run_episode(
     world: World,

@@ -12,17 +12,26 @@ from bve_mj.atomic import atomic_path
 from bve_mj.episode import EpisodeResult
 from bve_mj.errors import ConfigError
 
-__all__ = ["draw_path", "plot_episode", "plot_sample_paths"]
+__all__ = ["draw_path", "plot_episode", "plot_sample_paths", "require_matplotlib"]
+
+
+def require_matplotlib(field: str = "plots", value: object = "matplotlib", alternative: str = "") -> None:
+    """Raise a ConfigError naming ``field`` unless matplotlib can be imported."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise ConfigError(
+            field, value, "matplotlib installed: pip install 'bve_mj[plots]'" + alternative
+        ) from None
 
 
 def _pyplot():  # type: ignore[no-untyped-def]
-    try:
-        import matplotlib
+    require_matplotlib()
+    import matplotlib
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        raise ConfigError("plots", "matplotlib", "installed: pip install 'bve_mj[plots]'") from None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     return plt
 
 

@@ -274,16 +274,7 @@ def build_results_page(
     for name, label in (("synthetic", "synthetic"), ("mujoco", "mujoco")):
         r = results[name]
         sub = [c for c in r.cells if c.experiment == focus]
-        view = CampaignResult(
-            r.spec, r.settings, tuple(sub), r.rows, r.resumed_runs, r.computed_runs, r.crashed, r.wall_s,
-            figures / f"_{label}",
-        )  # fmt: skip
-        view.directory.mkdir(exist_ok=True)
-        for p in plot_campaign(view):
-            dst = figures / f"{label}_{focus}_{p.name}"
-            p.replace(dst)
-            written.append(dst)
-        view.directory.rmdir()
+        written += plot_campaign(r, sub, figures, prefix=f"{label}_{focus}_")
 
     syn, muj = _summaries(results["synthetic"]), _summaries(results["mujoco"])
     rec = {**_summaries(results["recoverability"]), **_summaries(results["recoverability_approach"])}
