@@ -343,6 +343,13 @@ class PlannerConfig:
         default=2,
         metadata=_why("local optimisations per plan, from the best-scoring of 15 seed points"),
     )
+    joint_margin_weight: float = field(
+        default=1.0,
+        metadata=_why(
+            "with the arm: weight of a soft barrier keeping each joint a tenth of its range off its "
+            "limits (0 = none: the arm then folds against its limits and approaches stall)"
+        ),
+    )
     max_iterations: int = field(default=100, metadata=_why("optimiser iteration cap"))
     feasibility_tol: float = field(
         default=1e-7, metadata=_why("largest constraint value accepted as feasible", "m or m^2")
@@ -356,6 +363,7 @@ class PlannerConfig:
         _non_negative("planner", "approach_aggressiveness", self.approach_aggressiveness)
         _non_negative("planner", "approach_set_point", self.approach_set_point)
         _non_negative("planner", "max_eigenvalue_trace_weight", self.max_eigenvalue_trace_weight)
+        _non_negative("planner", "joint_margin_weight", self.joint_margin_weight)
         _positive_int("planner", "starts", self.starts)
         _positive_int("planner", "max_iterations", self.max_iterations)
         _positive("planner", "feasibility_tol", self.feasibility_tol)
@@ -594,6 +602,15 @@ class EpisodeConfig:
         default=0.0003, metadata=_why("stop when the estimate moves less than this ...", "m")
     )
     stable_views: int = field(default=3, metadata=_why("... over this many views"))
+    stall_m: float = field(
+        default=0.005,
+        metadata=_why(
+            "stop when the camera moved less than this over stable_views views: the planner finds "
+            "no better reachable view, and repeating one view fuses the same bias again "
+            "(outcome stalled, or approach_blocked in approach mode)",
+            "m",
+        ),
+    )
     gate_probability: float = field(
         default=0.99999,
         metadata=_why(
@@ -622,6 +639,7 @@ class EpisodeConfig:
             _positive("episode", f, getattr(self, f))
         _non_negative("episode", "initial_error_m", self.initial_error_m)
         _non_negative("episode", "stop_stable_m", self.stop_stable_m)
+        _non_negative("episode", "stall_m", self.stall_m)
         _non_negative("episode", "approach_wall_distance_m", self.approach_wall_distance_m)
         if self.band_tolerance_m >= self.band_distance_m:
             raise ConfigError("episode.band_tolerance_m", self.band_tolerance_m, "a number < band_distance_m")

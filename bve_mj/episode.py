@@ -51,29 +51,44 @@ class StopRules:
         stable_m: the estimate moves less than this over ``stable_views`` views, each with an
             accepted measurement ("stable"; a gated-out view does not count as agreement).
         approach_distance_m: the camera is this close to the estimate ("approached").
+        stall_m: the camera moved less than this over ``stable_views`` views: the planner
+            finds no better view it can reach, and more views from one place would only fuse
+            the same errors again (a per-fruit bias such as the unknown radius is not averaged
+            out by repeating it). "approach_blocked" in approach mode (it cannot come closer),
+            else "stalled".
     """
 
     sigma_m: float | None = None
     stable_m: float | None = None
     stable_views: int = 3
     approach_distance_m: float | None = None
+    stall_m: float | None = None
 
     def outcome(self, views: list[ViewRecord]) -> str | None:
         b = views[-1].belief
+        n = self.stable_views
+        stalled = (
+            self.stall_m is not None
+            and len(views) > n
+            and max(
+                np.linalg.norm(views[-i].p_world_camera - views[-n - 1].p_world_camera)
+                for i in range(1, n + 1)
+            )
+            < self.stall_m
+        )
         if self.approach_distance_m is not None:
             if np.linalg.norm(views[-1].p_world_camera - b.mean) <= self.approach_distance_m:
                 return "approached"
-            return None  # approach mode ends only by approaching (or running out of views)
+            return "approach_blocked" if stalled else None
         if self.sigma_m is not None and np.sqrt(np.linalg.eigvalsh(b.cov)[-1]) <= self.sigma_m:
             return "converged"
-        n = self.stable_views
         if self.stable_m is not None and len(views) > n and all(v.accepted for v in views[-n:]):
             moves = [
                 np.linalg.norm(views[-i].belief.mean - views[-i - 1].belief.mean) for i in range(1, n + 1)
             ]
             if max(moves) <= self.stable_m:
                 return "stable"
-        return None
+        return "stalled" if stalled else None
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from bve_mj.experiments import EXPERIMENTS, with_overrides
 from bve_mj.faults import FaultyPlanner, FaultyWorld
 from bve_mj.planning.constraints import ConstraintName
 from bve_mj.planning.plan import Planner
-from bve_mj.robot import ArmKinematics, arm_kinematics, look_at_ik, make_arm_planner
+from bve_mj.robot import ArmKinematics, IkOptions, arm_kinematics, look_at_ik, make_arm_planner
 from bve_mj.sim.mujoco_world import MujocoWorld
 from bve_mj.sim.scene import Fruit, SceneInfo, build_scene
 from bve_mj.sim.world import World
@@ -129,18 +129,37 @@ class MujocoEpisode:
         }
 
 
+START_MARGIN = 0.15
+"""A ready pose is taken once its joints all keep this share of their range from the limits."""
+
+
 def _start_configuration(
     kin: ArmKinematics, estimate: np.ndarray, distance: float, rng: np.random.Generator
 ) -> np.ndarray:
-    """A ready pose: the camera ``distance`` in front of the estimate (robot side), looking at it."""
+    """A ready pose: the camera ``distance`` in front of the estimate (robot side), looking at it.
+
+    Viewing directions are tried in order of preference; for each, look-at IK from home and
+    from a few random configurations, keeping the solution farthest from the joint limits.
+    The first direction whose best solution keeps every joint ``START_MARGIN`` of its range
+    from the limits wins (else the best seen). A pose folded against its limits strands the
+    planner, which moves the arm locally: seed 0's approach once stalled 0.127 m from the
+    fruit with three joints at their limits.
+    """
+    best: tuple[float, np.ndarray] | None = None
+    single = IkOptions(restarts=0)
     for elevation in (0.15, 0.35, -0.1, 0.6, -0.3):
         for yaw in (0.0, 0.3, -0.3):
             d = np.array([-math.cos(yaw), math.sin(yaw), elevation])
             p = estimate + distance * d / np.linalg.norm(d)
-            ik = look_at_ik(kin, p, estimate, kin.home, rng)
-            if ik.success:
-                return ik.q
-    raise PlanningError(f"no reachable ready pose looks at the estimate {estimate.round(3).tolist()}")
+            for seed in (kin.home, *(kin.random_configuration(rng) for _ in range(7))):
+                ik = look_at_ik(kin, p, estimate, seed, rng, single)
+                if ik.success and (best is None or kin.limit_margin(ik.q) > best[0]):
+                    best = (kin.limit_margin(ik.q), ik.q)
+            if best is not None and best[0] >= START_MARGIN:
+                return best[1]
+    if best is None:
+        raise PlanningError(f"no reachable ready pose looks at the estimate {estimate.round(3).tolist()}")
+    return best[1]
 
 
 def run_mujoco_episode(
@@ -200,9 +219,16 @@ def run_mujoco_episode(
         loop_world = FaultyWorld(world, s.faults, fault_rng)
         planner = FaultyPlanner(planner, s.faults.planner_failure_p, fault_rng)
     stop = (
-        StopRules(approach_distance_m=ep.approach_distance_m)
+        StopRules(
+            approach_distance_m=ep.approach_distance_m, stall_m=ep.stall_m, stable_views=ep.stable_views
+        )
         if ep.approach
-        else StopRules(sigma_m=ep.stop_sigma_m, stable_m=ep.stop_stable_m, stable_views=ep.stable_views)
+        else StopRules(
+            sigma_m=ep.stop_sigma_m,
+            stable_m=ep.stop_stable_m,
+            stable_views=ep.stable_views,
+            stall_m=ep.stall_m,
+        )
     )
     try:
         on_view = None if recorder is None else recorder.on_view

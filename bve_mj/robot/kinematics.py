@@ -96,6 +96,13 @@ class ArmKinematics:
         q = np.asarray(q, dtype=float)
         return bool(np.all(q >= self.limits.lower - tol) and np.all(q <= self.limits.upper + tol))
 
+    def limit_margin(self, q: np.ndarray) -> float:
+        """The smallest distance of any joint to its nearer limit, as a share of that joint's
+        range (0 = at a limit, 0.5 = every joint mid-range)."""
+        q = np.asarray(q, dtype=float)
+        lo, hi = self.limits.lower, self.limits.upper
+        return float(np.min(np.minimum(q - lo, hi - q) / (hi - lo)))
+
     def random_configuration(self, rng: np.random.Generator) -> np.ndarray:
         """q uniform within the joint limits."""
         return rng.uniform(self.limits.lower, self.limits.upper)

@@ -84,6 +84,27 @@ class Reachability:
         return g
 
 
+@dataclass(frozen=True)
+class _LimitMargin:
+    """A soft barrier that keeps joints off their limits: w·Σ (max(0, δ - d_i)/δ)², d_i the
+    joint's distance to its nearer limit, δ a tenth of its range. Zero in the middle of the
+    range. Without it the local joint-space optimiser pins joints at their limits within two
+    views and strands the arm in a folded branch from which it cannot come closer."""
+
+    kin: ArmKinematics
+    weight: float
+
+    def __call__(self, q: np.ndarray) -> tuple[float, np.ndarray]:
+        lo, hi = self.kin.limits.lower, self.kin.limits.upper
+        delta = 0.1 * (hi - lo)
+        below, above = q - lo, hi - q
+        near_lower = below < above
+        d = np.where(near_lower, below, above)
+        s = np.maximum(0.0, delta - d) / delta
+        grad = -2.0 * self.weight * s / delta * np.where(near_lower, 1.0, -1.0)
+        return float(self.weight * s @ s), grad
+
+
 @dataclass
 class _JointProblem:
     """Camera position, axes, Jacobian and look-at terms at q, cached for SciPy's calls."""
@@ -184,10 +205,13 @@ class KinematicBvePlanner:
         prob = _JointProblem(self.kin, k_hat)
         bounds = list(zip(self.kin.limits.lower, self.kin.limits.upper, strict=True))
 
+        margin = _LimitMargin(self.kin, self.settings.planner.joint_margin_weight)
+
         def f(q: np.ndarray) -> tuple[float, np.ndarray]:
             p, _, J = prob.at(q)
             v, g = objective.value_and_gradient(p)
-            return v, J[:3].T @ g
+            m, dm = margin(q)
+            return v + m, J[:3].T @ g + dm
 
         def ineq(q: np.ndarray) -> np.ndarray:  # SciPy: ≥ 0
             p, _, _ = prob.at(q)
@@ -237,7 +261,7 @@ class KinematicBvePlanner:
             q = self.kin.clip(res.x)
             ok, _, p = verify(q)
             if ok:
-                value = objective.value(p)
+                value = f(q)[0]
                 if best is None or value < best[0]:
                     best = (value, q)
         if best is not None:
