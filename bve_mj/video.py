@@ -1,8 +1,22 @@
-"""Approach videos: an outside view with the camera's path, the true fruit and the estimate's
-3σ ellipsoid, beside the eye-in-hand view with the detection drawn on it."""
+"""Approach videos: an outside view that frames the fruit and the camera's path, beside the
+eye-in-hand view with the detection drawn on it.
+
+The outside view is a free camera placed, once per episode, on the side from which the fruit
+and the start of the camera path are not hidden by leaves, other fruit or the arm (checked
+with ray casts), and kept framing the region spanned by the fruit and the camera path so far
+(it eases out as the path grows). What the legend names is drawn on top of the rendered
+scene, so geometry never hides it: the camera path (numbered at each view), the true fruit
+(its outline and centre) and the estimate with its 3σ ellipsoid's outline. A zoom inset,
+centred on the true fruit, shows the estimate and its 3σ ellipse at a scale where they can be
+seen once they are millimetres small. The eye-in-hand overlay says which range is measured
+(from the detected silhouette and the assumed fruit radius) and which is true.
+"""
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -13,40 +27,181 @@ import numpy as np
 from bve_mj.episode import ViewRecord
 from bve_mj.estimation.belief import Belief
 from bve_mj.perception.detector import Detection, NoDetection
-from bve_mj.sim.render import add_marker
+from bve_mj.sim.arm import CAMERA_NAME
+from bve_mj.sim.scene import fruit_geom_name
 
 __all__ = ["EpisodeRecorder", "draw_detection"]
 
+# colours (RGB)
 _CYAN = (0, 255, 255)
+_WHITE = (255, 255, 255)
+_BLACK = (0, 0, 0)
+_PATH = (40, 150, 255)  # camera path: blue
+_TRUTH = (255, 40, 40)  # true fruit: red
+_EST = (255, 60, 255)  # estimate and its 3σ ellipse: magenta (not a leaf or fruit colour)
+_FONT = cv2.FONT_HERSHEY_SIMPLEX
+
+
+def _i(x: float) -> int:
+    """The nearest integer (a pixel coordinate or size)."""
+    return int(np.rint(x))
+
+
+def _mm(metres: float) -> str:
+    """A length in millimetres with two significant digits below 10 mm ("0.04 mm", "2.3 mm")."""
+    mm = 1e3 * metres
+    return f"{mm:.0f} mm" if mm >= 10 else f"{mm:.1f} mm" if mm >= 1 else f"{mm:.2f} mm"
+
+
+def _text(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.5,
+          colour: tuple[int, int, int] = _WHITE, thickness: int = 1) -> None:  # fmt: skip
+    """Text with a dark outline, readable on any background."""
+    cv2.putText(img, text, org, _FONT, scale, _BLACK, thickness + 2, cv2.LINE_AA)
+    cv2.putText(img, text, org, _FONT, scale, colour, thickness, cv2.LINE_AA)
+
+
+def _tag(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.45,
+         colour: tuple[int, int, int] = _WHITE) -> None:  # fmt: skip
+    """Text on a dark box (a label placed in the scene)."""
+    (tw, th), base = cv2.getTextSize(text, _FONT, scale, 1)
+    x, y = org
+    _shade(img, x - 3, y - th - 3, x + tw + 3, y + base + 1, keep=0.3)
+    cv2.putText(img, text, org, _FONT, scale, colour, 1, cv2.LINE_AA)
+
+
+def _shade(img: np.ndarray, x0: int, y0: int, x1: int, y1: int, keep: float = 0.35) -> None:
+    """Darken a rectangle (a backdrop for text) in place."""
+    h, w = img.shape[:2]
+    x0, x1, y0, y1 = max(0, x0), min(w, x1), max(0, y0), min(h, y1)
+    if x1 > x0 and y1 > y0:
+        img[y0:y1, x0:x1] = (img[y0:y1, x0:x1] * keep).astype(np.uint8)
+
+
+def _text_block(img: np.ndarray, lines: Sequence[tuple[str, tuple[int, int, int]]], top: int = 0,
+                scale: float = 0.55, step: int = 24) -> None:  # fmt: skip
+    """Lines of text on a darkened band across the top of the image."""
+    if not lines:
+        return
+    _shade(img, 0, top, img.shape[1], top + 10 + step * len(lines))
+    for i, (line, colour) in enumerate(lines):
+        cv2.putText(img, line, (10, top + step * (i + 1)), _FONT, scale, colour, 1, cv2.LINE_AA)
 
 
 def draw_detection(
-    image_rgb: np.ndarray, det: Detection | NoDetection | None, caption: str = ""
+    image_rgb: np.ndarray,
+    det: Detection | NoDetection | None,
+    caption: str = "",
+    *,
+    assumed_radius_m: float | None = None,
+    true_range_m: float | None = None,
+    true_radius_m: float | None = None,
 ) -> np.ndarray:
-    """A copy of the image with the fitted silhouette and centre, or the reason for none."""
+    """A copy of the image with the fitted silhouette and centre (cyan), or the reason for
+    none; the caption and the measured range (and, when given, the true one) above it.
+
+    The measured range is the detector's ρ = r / sin α from the silhouette and the assumed
+    fruit radius r (``assumed_radius_m``); ``true_range_m`` is the true camera-to-fruit-centre
+    distance, which differs by the ratio of the true to the assumed radius.
+    """
     img = np.ascontiguousarray(image_rgb).copy()
+    lines: list[tuple[str, tuple[int, int, int]]] = []
+    if caption:
+        lines.append((caption, _WHITE))
     if isinstance(det, Detection):
         c = tuple(int(x) for x in np.rint(det.centre_px).astype(int))
         cv2.circle(img, c, int(np.rint(det.radius_px)), _CYAN, 2, cv2.LINE_AA)
         cv2.drawMarker(img, c, _CYAN, cv2.MARKER_CROSS, 14, 2)
-        text = f"range {det.range_m:.3f} m"
+        assumed = "" if assumed_radius_m is None else f" (assumes r = {1e3 * assumed_radius_m:.1f} mm)"
+        lines.append((f"measured range {det.range_m:.3f} m{assumed}", _CYAN))
     elif isinstance(det, NoDetection):
-        text = f"no detection: {det.reason}"
-    else:
-        text = ""
-    for i, line in enumerate([caption, text]):
-        if line:
-            cv2.putText(
-                img, line, (10, 26 + 26 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.65, (255, 255, 255), 2, cv2.LINE_AA
-            )
+        lines.append((f"no detection: {det.reason}", _CYAN))
+    if true_range_m is not None:
+        radius = "" if true_radius_m is None else f" (true r = {1e3 * true_radius_m:.1f} mm)"
+        lines.append((f"true range {true_range_m:.3f} m{radius}", (255, 120, 120)))
+    _text_block(img, lines)
     return img
+
+
+@dataclass(frozen=True)
+class _View:
+    """A free camera's pose and pinhole (from the scene MuJoCo drew), for projecting points."""
+
+    pos: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+    forward: np.ndarray
+    focal_px: float
+    centre: tuple[float, float]
+
+    def project(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel coordinates (N, 2) and depths (N,) of world points (N, 3)."""
+        rel = np.atleast_2d(p) - self.pos
+        z = rel @ self.forward
+        zs = np.where(z > 1e-6, z, np.nan)
+        u = self.centre[0] + self.focal_px * (rel @ self.right) / zs
+        v = self.centre[1] - self.focal_px * (rel @ self.up) / zs
+        return np.stack([u, v], axis=1), z
+
+    def ellipse(
+        self, mean: np.ndarray, cov: np.ndarray, k: float = 3.0
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """The k-σ ellipsoid's outline (linearised at the mean): centre px, half-axes px and
+        angle [deg] packed as (centre, [a, b, angle]); None behind the camera."""
+        (uv,), (z,) = self.project(mean)
+        if not z > 1e-6:
+            return None
+        rel = mean - self.pos
+        x, y = rel @ self.right, rel @ self.up
+        J = (self.focal_px / z) * np.stack(
+            [self.right - x / z * self.forward, -(self.up - y / z * self.forward)]
+        )
+        w, V = np.linalg.eigh(J @ cov @ J.T)
+        a, b = k * np.sqrt(np.maximum(w[::-1], 0.0))
+        angle = math.degrees(math.atan2(V[1, 1], V[0, 1]))
+        return uv, np.array([a, b, angle])
+
+
+def _axes(azimuth: float, elevation: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A MuJoCo free camera's forward, right and up unit vectors (degrees in)."""
+    az, el = math.radians(azimuth), math.radians(elevation)
+    fwd = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    return fwd, right, np.cross(right, fwd)
+
+
+def _frame(
+    points: np.ndarray,
+    azimuth: float,
+    elevation: float,
+    fovy_deg: float,
+    aspect: float,
+    min_half_m: float = 0.15,
+    fill: tuple[float, float] = (0.72, 0.58),
+) -> tuple[np.ndarray, float]:
+    """(lookat, distance) of a free camera at these angles that shows every point, the
+    points filling at most ``fill`` (horizontal, vertical) of the image, and at least
+    ``min_half_m`` either side of the centre (a close view of a short path)."""
+    fwd, right, up = _axes(azimuth, elevation)
+    coords = points @ np.stack([right, up, fwd], axis=1)
+    lo, hi = coords.min(axis=0), coords.max(axis=0)
+    mid = (lo + hi) / 2
+    lookat = mid @ np.stack([right, up, fwd])
+    ty = math.tan(math.radians(fovy_deg) / 2) * fill[1]
+    tx = math.tan(math.radians(fovy_deg) / 2) * aspect * fill[0]
+    rel = coords - mid
+    need = np.maximum(np.abs(rel[:, 0]) / tx, np.abs(rel[:, 1]) / ty) - rel[:, 2]
+    distance = max(float(need.max()), min_half_m / ty)
+    return lookat, distance
 
 
 class EpisodeRecorder:
     """Collects frames while a MuJoCo episode runs and writes an mp4.
 
     Use ``on_step`` as the world's per-physics-step hook and ``on_view`` as the episode's
-    per-view hook (``run_mujoco_episode(..., recorder=...)`` wires both).
+    per-view hook (``run_mujoco_episode(..., recorder=...)`` wires both). Each frame is the
+    outside view (left) beside the last eye-in-hand image (right), 1280 x 480 for the
+    default 640 x 480 camera; one outside render per frame.
     """
 
     def __init__(self, path: str | Path, fps: int = 25, hold_view_s: float = 0.4) -> None:
@@ -57,10 +212,19 @@ class EpisodeRecorder:
         self._writer: Any = None
         self._world: Any = None
         self._belief: Belief | None = None
-        self._path: list[np.ndarray] = []
+        self._trail: list[np.ndarray] = []  # the true camera position at every frame
+        self._views: list[np.ndarray] = []  # ... and at every view
         self._eye: np.ndarray | None = None
         self._next_t = 0.0
         self._view = 0
+        self._cam_id = -1
+        self._fruit = np.zeros(3)
+        self._radius = 0.0
+        self._azimuth, self._elevation = 0.0, -25.0
+        self._lookat: np.ndarray | None = None
+        self._distance = 1.0
+        self._glcam: _View | None = None
+        self._corner: tuple[int, int] | None = None
 
     # -- wiring
     def attach(self, world: Any, prior: Belief) -> None:
@@ -69,24 +233,38 @@ class EpisodeRecorder:
         self._world, self._belief = world, prior
         self._writer = imageio.get_writer(str(self.path), fps=self.fps, codec="libx264", macro_block_size=16)
         self._next_t = world.data.time
+        self._cam_id = int(world.model.camera(CAMERA_NAME).id)
+        self._fruit = np.asarray(world.p_world_fruit, dtype=float)
+        self._radius = float(world.info.target.radius_m)
+        self._trail = [self._camera_now()]
+        self._azimuth, self._elevation = self._choose_side()
 
     def on_step(self, sim_time: float) -> None:
         if self._writer is not None and sim_time >= self._next_t:
             self._next_t = sim_time + 1.0 / self.fps
+            self._trail.append(self._camera_now())
             self._write(self._compose())
 
     def on_view(self, record: ViewRecord) -> None:
         if self._writer is None:
             return
         self._belief = record.belief
-        self._path.append(np.asarray(record.p_world_camera, dtype=float))
         self._view = record.iteration
+        here = self._camera_now()
+        self._trail.append(here)
+        self._views.append(here)
         w = self._world
         if getattr(w.last, "image", None) is not None:
-            err = 1e3 * float(np.linalg.norm(record.belief.mean - w.p_world_fruit))
-            sig = 1e3 * float(np.sqrt(np.linalg.eigvalsh(record.belief.cov)[-1]))
-            caption = f"view {record.iteration}: error {err:.1f} mm, sigma max {sig:.1f} mm"
-            self._eye = draw_detection(w.last.image, w.last.detection, caption)
+            err = _mm(float(np.linalg.norm(record.belief.mean - self._fruit)))
+            sig = _mm(float(np.sqrt(np.linalg.eigvalsh(record.belief.cov)[-1])))
+            caption = f"eye-in-hand, view {record.iteration}: error {err}, sigma max {sig}"
+            prior = getattr(w, "fruit_prior", None)
+            self._eye = draw_detection(
+                w.last.image, w.last.detection, caption,
+                assumed_radius_m=None if prior is None else float(prior.radius_m),
+                true_range_m=float(np.linalg.norm(here - self._fruit)),
+                true_radius_m=self._radius,
+            )  # fmt: skip
         frame = self._compose()
         for _ in range(self.hold_frames):
             self._write(frame)
@@ -98,36 +276,211 @@ class EpisodeRecorder:
             self._writer = None
         return self.frames_written
 
+    # -- the outside camera
+    def _camera_now(self) -> np.ndarray:
+        return np.array(self._world.data.cam_xpos[self._cam_id], dtype=float)
+
+    def _size(self) -> tuple[int, int]:
+        r = self._world.renderer
+        return int(r.width), int(r.height)
+
+    def _fovy(self) -> float:
+        return float(self._world.model.vis.global_.fovy)
+
+    def _choose_side(self) -> tuple[float, float]:
+        """(azimuth, elevation) [deg] of the outside camera: from the side of the line from
+        the camera to the fruit (the arm reaches along it, so it does not hide the path), the
+        candidate whose rays to the fruit and the camera path's start are least blocked."""
+        m, d = self._world.model, self._world.data
+        f, c0 = self._fruit, self._trail[0]
+        a = (f - c0)[:2]
+        if np.linalg.norm(a) < 1e-6:
+            a = f[:2] if np.linalg.norm(f[:2]) > 1e-6 else np.array([1.0, 0.0])
+        base = math.degrees(math.atan2(a[1], a[0]))
+        target = m.geom(fruit_geom_name(self._world.info.target.name)).id
+        w, h = self._size()
+        pts = np.stack([f + self._radius * np.eye(3)[2], f - self._radius * np.eye(3)[2], f, c0])
+        best: tuple[float, float, float] | None = None
+        for tilt in (35.0, 60.0, 10.0):  # from the side, turned this far towards behind the camera
+            for sign in (1.0, -1.0):
+                for elevation in (-25.0, -40.0, -12.0):
+                    azimuth = base + sign * (90.0 - tilt)
+                    lookat, dist = _frame(pts, azimuth, elevation, self._fovy(), w / h)
+                    fwd, _, _ = _axes(azimuth, elevation)
+                    eye = lookat - dist * fwd
+                    blocked = 0.0
+                    for goal, weight, ok_geom, slack in (
+                        (f, 3.0, target, self._radius + 0.002),
+                        (0.5 * (f + c0), 1.0, -1, 0.0),
+                        (c0, 2.0, -1, 0.06),  # the arm's own camera housing may be hit near c0
+                    ):
+                        vec = goal - eye
+                        dist_goal = float(np.linalg.norm(vec))
+                        geomid = np.zeros(1, dtype=np.int32)
+                        hit = mujoco.mj_ray(m, d, eye, vec / dist_goal, None, 1, -1, geomid)
+                        if hit >= 0 and hit < dist_goal - slack and int(geomid[0]) != ok_geom:
+                            blocked += weight
+                    if best is None or blocked < best[0]:
+                        best = (blocked, azimuth, elevation)
+                    if blocked == 0.0:
+                        return azimuth, elevation
+        assert best is not None
+        return best[1], best[2]
+
+    def _update_framing(self) -> None:
+        w, h = self._size()
+        pts = [self._fruit + s * self._radius * e for s in (-1.0, 1.0) for e in np.eye(3)]
+        pts += self._trail
+        lookat, dist = _frame(np.array(pts), self._azimuth, self._elevation, self._fovy(), w / h)
+        if self._lookat is None:
+            self._lookat, self._distance = lookat, dist
+        else:  # ease towards the new framing (no jumps as the path grows)
+            self._lookat = self._lookat + 0.2 * (lookat - self._lookat)
+            self._distance += 0.2 * (dist - self._distance)
+
+    def _grab_camera(self, scene: mujoco.MjvScene) -> None:
+        """Keep the pose and pinhole MuJoCo draws with (to project the overlays exactly)."""
+        g0, g1 = scene.camera[0], scene.camera[1]
+        fwd = np.array(g0.forward, dtype=float)
+        up = np.array(g0.up, dtype=float)
+        w, h = self._size()
+        focal = (h / 2) * float(g0.frustum_near) / float(g0.frustum_top)
+        self._glcam = _View(
+            0.5 * (np.array(g0.pos, dtype=float) + np.array(g1.pos, dtype=float)),
+            np.cross(fwd, up), up, fwd, focal, ((w - 1) / 2, (h - 1) / 2),
+        )  # fmt: skip
+
     # -- drawing
-    def _decorate(self, scene: mujoco.MjvScene) -> None:
-        eye3 = np.eye(3)
-        for i, p in enumerate(self._path):
-            add_marker(scene, mujoco.mjtGeom.mjGEOM_SPHERE, [0.008, 0, 0], p, eye3, [0.2, 0.55, 1.0, 1.0])
-            if i > 0 and scene.ngeom < scene.maxgeom:
-                g = scene.geoms[scene.ngeom]
-                # mjv_connector sets only type, size, pos and mat: initialise the rest first,
-                # or stale fields of an earlier frame's geom (a material id) reach the renderer
-                mujoco.mjv_initGeom(
-                    g, mujoco.mjtGeom.mjGEOM_CAPSULE, np.zeros(3), np.zeros(3), eye3.reshape(9),
-                    np.array([0.2, 0.55, 1.0, 0.8], dtype=np.float32),
-                )  # fmt: skip
-                mujoco.mjv_connector(g, mujoco.mjtGeom.mjGEOM_CAPSULE, 0.003, self._path[i - 1], p)
-                scene.ngeom += 1
+    def _overlay(self, img: np.ndarray, cam: _View) -> None:
+        h, w = img.shape[:2]
+        # camera path: the true camera position at every frame, a dot and number at each view
+        uv, z = cam.project(np.array(self._trail))
+        ok = z > 1e-3
+        pts = np.rint(uv[ok]).astype(np.int32).reshape(-1, 1, 2)
+        if len(pts) > 1:
+            cv2.polylines(img, [pts], False, _BLACK, 5, cv2.LINE_AA)
+            cv2.polylines(img, [pts], False, _PATH, 2, cv2.LINE_AA)
+        if self._views:
+            vuv, vz = cam.project(np.array(self._views))
+            for i, (p, zz) in enumerate(zip(vuv, vz, strict=True)):
+                if zz > 1e-3:
+                    c = (int(p[0]), int(p[1]))
+                    cv2.circle(img, c, 6, _BLACK, -1, cv2.LINE_AA)
+                    cv2.circle(img, c, 4, _PATH, -1, cv2.LINE_AA)
+                    _tag(img, str(i), (c[0] + 8, c[1] - 7))
+        if ok[-1]:
+            c = (int(uv[-1, 0]), int(uv[-1, 1]))
+            cv2.circle(img, c, 9, _WHITE, 2, cv2.LINE_AA)  # where the camera is now
+        # true fruit: outline at its true radius and its centre
+        (fuv,), (fz,) = cam.project(self._fruit)
+        if fz > 1e-3:
+            c = (_i(fuv[0]), _i(fuv[1]))
+            r_px = max(4, _i(cam.focal_px * self._radius / fz))
+            cv2.circle(img, c, r_px, _BLACK, 4, cv2.LINE_AA)
+            cv2.circle(img, c, r_px, _TRUTH, 2, cv2.LINE_AA)
+            cv2.drawMarker(img, c, _TRUTH, cv2.MARKER_CROSS, 10, 2)
+            _tag(img, "true fruit", (c[0] + r_px + 5, c[1] + r_px))
+        # estimate and its 3σ ellipsoid's outline (too small to see here once converged: the inset)
         if self._belief is not None:
-            w, V = np.linalg.eigh(self._belief.cov)
-            size = np.maximum(3.0 * np.sqrt(np.maximum(w, 0.0)), 0.004)  # 3σ, drawn at least 4 mm
-            add_marker(
-                scene, mujoco.mjtGeom.mjGEOM_ELLIPSOID, size, self._belief.mean, V, [0.1, 0.9, 0.2, 0.45]
-            )
+            ell = cam.ellipse(self._belief.mean, self._belief.cov)
+            if ell is not None:
+                (eu, ev), (a, b, ang) = ell
+                c = (_i(eu), _i(ev))
+                if a >= 3.0:
+                    axes = (_i(a), max(1, _i(b)))
+                    cv2.ellipse(img, c, axes, ang, 0, 360, _BLACK, 4, cv2.LINE_AA)
+                    cv2.ellipse(img, c, axes, ang, 0, 360, _EST, 2, cv2.LINE_AA)
+                cv2.circle(img, c, 5, _BLACK, -1, cv2.LINE_AA)
+                cv2.circle(img, c, 3, _EST, -1, cv2.LINE_AA)
+        self._inset(img, cam)
+        # title and legend
+        _shade(img, 0, 0, w, 30)
+        cv2.putText(img, "outside view", (10, 21), _FONT, 0.55, _WHITE, 1, cv2.LINE_AA)
+        _shade(img, 0, h - 30, w, h)
+        y = h - 11
+        cv2.line(img, (10, y - 4), (34, y - 4), _PATH, 2, cv2.LINE_AA)
+        cv2.circle(img, (22, y - 4), 4, _PATH, -1, cv2.LINE_AA)
+        cv2.putText(img, "camera path (n: view)", (40, y), _FONT, 0.45, _WHITE, 1, cv2.LINE_AA)
+        cv2.circle(img, (226, y - 4), 7, _TRUTH, 2, cv2.LINE_AA)
+        cv2.putText(img, "true fruit", (238, y), _FONT, 0.45, _WHITE, 1, cv2.LINE_AA)
+        cv2.ellipse(img, (336, y - 4), (11, 6), 0, 0, 360, _EST, 2, cv2.LINE_AA)
+        cv2.circle(img, (336, y - 4), 3, _EST, -1, cv2.LINE_AA)
+        cv2.putText(img, "estimate, 3 sigma ellipsoid", (352, y), _FONT, 0.45, _WHITE, 1, cv2.LINE_AA)
+
+    def _inset_corner(self, cam: _View, w: int, h: int, size: int) -> tuple[int, int]:
+        """The top-left pixel of the zoom inset: the current corner unless the true fruit or
+        the path's last stretch would lie under it, else the corner farthest from them."""
+        (fuv,), _ = cam.project(self._fruit)
+        uv, z = cam.project(np.array(self._trail[-40:]))
+        keep = np.vstack([fuv[None], uv[z > 1e-3]])
+        keep = keep[np.all(np.isfinite(keep), axis=1)]
+        corners = [(w - size - 8, 38), (8, 38), (w - size - 8, h - size - 38), (8, h - size - 38)]
+
+        def hits(c: tuple[int, int]) -> int:
+            pad = 30
+            inside = (
+                (keep[:, 0] > c[0] - pad) & (keep[:, 0] < c[0] + size + pad)
+                & (keep[:, 1] > c[1] - pad) & (keep[:, 1] < c[1] + size + pad)
+            )  # fmt: skip
+            return int(inside.sum()) + (1000 if len(keep) and inside[0] else 0)
+
+        current = self._corner if self._corner in corners else corners[0]
+        if hits(current) == 0:
+            return current
+        self._corner = min(corners, key=hits)
+        return self._corner
+
+    def _inset(self, img: np.ndarray, cam: _View, size: int = 180) -> None:
+        """A corner: the true fruit, the estimate and its 3σ ellipse, orthographic along the
+        outside camera's axes, centred on the true fruit at a scale that shows the ellipse."""
+        if self._belief is None:
+            return
+        h, w = img.shape[:2]
+        x0, y0 = self._inset_corner(cam, w, h, size)
+        panel = (img[y0 : y0 + size, x0 : x0 + size] * 0.25).astype(np.uint8)
+        axes2 = np.stack([cam.right, -cam.up])  # panel x right, y down
+        err = axes2 @ (self._belief.mean - self._fruit)
+        cov2 = axes2 @ self._belief.cov @ axes2.T
+        wv, V = np.linalg.eigh(cov2)
+        three = 3.0 * np.sqrt(np.maximum(wv, 0.0))
+        extent = float(np.abs(err).max() + three.max())
+        half = next((s for s in (0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5) if 0.8 * s >= extent), 1.0)
+        scale = (size / 2) / half  # px per metre
+        mid = size / 2
+
+        def px(v: np.ndarray) -> tuple[int, int]:
+            return _i(mid + scale * v[0]), _i(mid + scale * v[1])
+
+        cv2.circle(panel, px(np.zeros(2)), _i(scale * self._radius), _TRUTH, 1, cv2.LINE_AA)
+        cv2.drawMarker(panel, px(np.zeros(2)), _TRUTH, cv2.MARKER_CROSS, 16, 2)
+        ang = math.degrees(math.atan2(V[1, 1], V[0, 1]))
+        ax = (max(1, _i(scale * three[1])), max(1, _i(scale * three[0])))
+        cv2.ellipse(panel, px(err), ax, ang, 0, 360, _EST, 2, cv2.LINE_AA)
+        cv2.circle(panel, px(err), 3, _EST, -1, cv2.LINE_AA)
+        bar = max(b for b in (0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2) if b <= 0.55 * half)
+        end = 10 + _i(scale * bar)
+        cv2.line(panel, (10, size - 12), (end, size - 12), _WHITE, 2)
+        cv2.putText(panel, f"{1e3 * bar:g} mm", (end + 5, size - 8), _FONT, 0.4, _WHITE, 1, cv2.LINE_AA)
+        cv2.putText(panel, "zoom on the fruit", (6, 16), _FONT, 0.42, _WHITE, 1, cv2.LINE_AA)
+        e = _mm(float(np.linalg.norm(self._belief.mean - self._fruit)))
+        cv2.putText(panel, f"error {e}", (6, 34), _FONT, 0.42, _EST, 1, cv2.LINE_AA)
+        cv2.rectangle(panel, (0, 0), (size - 1, size - 1), _WHITE, 1)
+        img[y0 : y0 + size, x0 : x0 + size] = panel
 
     def _compose(self) -> np.ndarray:
         w = self._world
-        truth = w.p_world_fruit
-        lookat = 0.5 * (truth + np.array([0.1, 0.0, 0.3]))
-        outside = w.renderer.render_free(w.data, lookat, 1.2, 35.0, -22.0, self._decorate)
-        cv2.putText(outside, "blue: camera path   green: estimate (3 sigma)   red: true fruit", (10, 465),
-                    cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)  # fmt: skip
-        eye = self._eye if self._eye is not None else np.zeros_like(outside)
+        self._update_framing()
+        assert self._lookat is not None
+        outside = w.renderer.render_free(
+            w.data, self._lookat, self._distance, self._azimuth, self._elevation, self._grab_camera
+        )
+        if self._glcam is not None:
+            self._overlay(outside, self._glcam)
+        if self._eye is not None:
+            eye = self._eye
+        else:
+            eye = np.zeros_like(outside)
+            _text(eye, "eye-in-hand: waiting for the first view", (10, 26), 0.55)
         return np.hstack([outside, eye])
 
     def _write(self, frame: np.ndarray) -> None:
