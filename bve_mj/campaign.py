@@ -29,7 +29,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, get_args
+from typing import Any, Literal, TypeVar, get_args
 
 import numpy as np
 
@@ -47,6 +47,7 @@ __all__ = [
     "RunStore",
     "cell_settings",
     "episode_seed",
+    "local_batches",
     "parse_grid",
     "run_campaign",
     "run_cell",
@@ -124,19 +125,22 @@ def parse_grid(text: str) -> tuple[float, ...]:
 class CampaignSpec:
     """What to run: the product of the axes, ``runs`` seeded runs per cell.
 
-    ``initial_errors_m`` empty: each world's own default (``protocol.initial_error_m`` in the
-    synthetic world, ``episode.initial_error_m`` in MuJoCo). ``approach``: the eq. 13 term on
-    (and, in MuJoCo, approach mode: no band, end close to the fruit).
+    Empty or None axes take the settings' value for each world, so a settings file is never
+    silently overridden: ``measurements`` empty: ``measurement.kind`` (``auto``: range in the
+    synthetic world, camera in MuJoCo); ``initial_errors_m`` empty: ``protocol.initial_error_m``
+    in the synthetic world, ``episode.initial_error_m`` in MuJoCo; ``approach`` None:
+    ``episode.approach``. ``approach``: the eq. 13 term on (and, in MuJoCo, approach mode: no
+    band, end close to the fruit).
     """
 
     experiments: tuple[str, ...] = tuple(EXPERIMENTS)
     worlds: tuple[str, ...] = ("synthetic",)
     planners: tuple[str, ...] = ("bve",)
-    measurements: tuple[str, ...] = ("range",)
+    measurements: tuple[str, ...] = ()
     initial_errors_m: tuple[float, ...] = ()
     runs: int = 100
     seed: int = 0
-    approach: bool = False
+    approach: bool | None = None
     recovered_mm: float = field(default=30.0, metadata={"why": "a run 'recovered' below this final error"})
 
     def __post_init__(self) -> None:
@@ -144,7 +148,10 @@ class CampaignSpec:
         object.__setattr__(self, "experiments", exps)
         object.__setattr__(self, "worlds", _names("worlds", self.worlds, WORLDS))
         object.__setattr__(self, "planners", _names("planners", self.planners, PLANNERS))
-        object.__setattr__(self, "measurements", _names("measurements", self.measurements, MEASUREMENTS))
+        if self.measurements:
+            object.__setattr__(self, "measurements", _names("measurements", self.measurements, MEASUREMENTS))
+        else:
+            object.__setattr__(self, "measurements", ())
         errs = self.initial_errors_m
         if isinstance(errs, str) or not all(
             isinstance(e, (int, float)) and not isinstance(e, bool) and math.isfinite(e) and e >= 0
@@ -155,8 +162,8 @@ class CampaignSpec:
         for name, value, lo in (("runs", self.runs, 1), ("seed", self.seed, 0)):
             if isinstance(value, bool) or not isinstance(value, int) or value < lo:
                 raise ConfigError(name, value, f"an integer >= {lo}")
-        if not isinstance(self.approach, bool):
-            raise ConfigError("approach", self.approach, "true or false")
+        if self.approach is not None and not isinstance(self.approach, bool):
+            raise ConfigError("approach", self.approach, "true, false or none (the settings' value)")
         r = self.recovered_mm
         if isinstance(r, bool) or not isinstance(r, (int, float)) or not (math.isfinite(r) and r > 0):
             raise ConfigError("recovered_mm", r, "a number of millimetres > 0")
@@ -164,14 +171,16 @@ class CampaignSpec:
     def cells(self, settings: Settings) -> list[Cell]:
         """Every cell, in a fixed order (world, experiment, planner, measurement, error)."""
         out = []
+        approach = settings.episode.approach if self.approach is None else self.approach
         for world in self.worlds:
             synthetic = world == "synthetic"
             default = settings.protocol.initial_error_m if synthetic else settings.episode.initial_error_m
+            measurements = self.measurements or (settings.for_world(world).measurement.kind,)  # type: ignore[arg-type]
             for exp in self.experiments:
                 for planner in self.planners:
-                    for meas in self.measurements:
+                    for meas in measurements:
                         for e in self.initial_errors_m or (default,):
-                            out.append(Cell(world, exp, planner, meas, e, self.approach))
+                            out.append(Cell(world, exp, planner, meas, e, approach))
         return out
 
     def as_dict(self) -> dict[str, Any]:
@@ -287,7 +296,7 @@ def run_cell(settings: Settings, cell: Cell, seed: int, run: int) -> dict[str, A
 
         ep_seed = episode_seed(seed, run)
         episode = run_mujoco_episode(s, ep_seed)
-        kin = arm_kinematics(s.robot.name, s.robot.joint_limits)
+        kin = arm_kinematics(s.robot.name, s.robot.limit_set)
         violation = 0.0
         for v in episode.result.views:
             q = (v.world or {}).get("q_rad")
@@ -380,6 +389,7 @@ class RunStore:
 
 # --------------------------------------------------------------------------- execution
 Task = tuple[Settings, tuple[tuple[Cell, int], ...], int]
+T = TypeVar("T")
 
 
 def _run_task(task: Task) -> list[dict[str, Any]]:
@@ -401,14 +411,18 @@ def _run_task(task: Task) -> list[dict[str, Any]]:
     return rows
 
 
-def _local_batches(tasks: list[Task], workers: int) -> Iterator[list[dict[str, Any]]]:
+def local_batches(
+    run: Callable[[T], list[dict[str, Any]]], tasks: Sequence[T], workers: int
+) -> Iterator[list[dict[str, Any]]]:
+    """``run(task)`` for every task, in this process (``workers`` = 1) or in a pool of
+    spawned processes, yielding each task's rows as it finishes."""
     if workers == 1:
-        yield from map(_run_task, tasks)
+        yield from map(run, tasks)
         return
     # spawn, not fork: a forked child inherits the parent's EGL/OpenGL state and can deadlock
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     try:
-        pending: set[Future[list[dict[str, Any]]]] = {pool.submit(_run_task, t) for t in tasks}
+        pending: set[Future[list[dict[str, Any]]]] = {pool.submit(run, t) for t in tasks}
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in finished:
@@ -512,7 +526,7 @@ def run_campaign(
         if progress is not None:
             progress(resumed, total)
         tasks: list[Task] = [(settings, chunk, spec.seed) for chunk in _chunks(todo, workers)]
-        batches = _dask_batches(tasks, scheduler) if scheduler else _local_batches(tasks, workers)
+        batches = _dask_batches(tasks, scheduler) if scheduler else local_batches(_run_task, tasks, workers)
         finished = resumed
         for batch in batches:
             store.add(batch)

@@ -9,21 +9,40 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib.util
 import math
 import os
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from bve_mj.atomic import write_json_atomic
+
+if TYPE_CHECKING:
+    from bve_mj.campaign import CampaignSpec
+    from bve_mj.config import Settings
 
 __all__ = ["main"]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_NOT_LOCALISED = 0, 1, 2, 3
-NOT_LOCALISED = ("unreachable", "never_detected")
-"""Episode outcomes that exit 3: the fruit was out of the arm's reach, or never seen."""
+NOT_LOCALISED = ("unreachable", "never_detected", "unreliable", "approach_blocked")
+"""Episode outcomes that exit 3: the fruit was out of the arm's reach, never seen, its estimate
+is not supported by the measurements, or (approach mode) the arm could not bring the camera
+close."""
+OUTCOME_NOTES = {
+    "unreachable": "the arm cannot reach a pose that looks at the fruit's estimate: nothing was measured",
+    "never_detected": "no view detected the fruit: the estimate is the prior",
+    "approach_blocked": "the arm found no reachable pose closer to the fruit (the camera stopped "
+    "moving): the fruit is localised but not approached",
+    "unreliable": "the final estimate is not supported by the measurements (fewer than two "
+    "accepted since the last reset, or most recent ones gated out as disagreeing with it): do not "
+    "trust it",
+    "stalled": "the camera stopped moving (no better reachable view): more views would only repeat "
+    "the same measurement",
+}
+"""What an outcome means, printed under the episode's summary."""
 
 
 class _UsageError(Exception):
@@ -39,6 +58,7 @@ class _Parser(argparse.ArgumentParser):
 
 def _build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="bve-mj", description="Active monocular 3D fruit localisation: BVE + EKF.")
+    parser.add_argument("--version", action="version", version=f"bve-mj {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     paper = sub.add_parser(
         "paper",
@@ -53,7 +73,9 @@ def _build_parser() -> argparse.ArgumentParser:
     paper.add_argument("--runs", default="100", help="runs per experiment (default 100)")
     paper.add_argument("--seed", default="0", help="base seed (default 0)")
     paper.add_argument("--steps", default=None, help="planned views per run (default from settings: 30)")
-    paper.add_argument("--measurement", default=None, help="range (the paper's EKF) or camera")
+    paper.add_argument(
+        "--measurement", default=None, help="range (the paper's EKF) or camera (default from settings: range)"
+    )
     paper.add_argument("--planner", default=None, help="bve, random or circle")
     paper.add_argument("--planning-model", default=None, help="paper or consistent")
     paper.add_argument("--optimiser", default=None, help="slsqp or trust-constr")
@@ -74,7 +96,9 @@ def _build_parser() -> argparse.ArgumentParser:
     ep.add_argument("--experiment", default=None, help="constraint set and loss, E1..E10 (default E5)")
     ep.add_argument("--seed", default="0", help="scene, prior and sensor seed (default 0)")
     ep.add_argument("--views", default=None, help="most planned views (default 15)")
-    ep.add_argument("--measurement", default="camera", help="camera (default) or range")
+    ep.add_argument(
+        "--measurement", default=None, help="camera or range (default from settings: camera here)"
+    )
     ep.add_argument("--planner", default=None, help="bve, random or circle")
     ep.add_argument("--planning-model", default=None, help="paper or consistent")
     ep.add_argument("--robot", default=None, help="manipulator_h, ur5 or panda")
@@ -109,7 +133,10 @@ def _build_parser() -> argparse.ArgumentParser:
         c.add_argument("--worlds", default="synthetic", help="synthetic, mujoco or synthetic,mujoco")
         c.add_argument("--planners", default="bve", help="any of bve,random,circle")
         c.add_argument(
-            "--measurements", default=None, help="range,camera (default: range synthetic, camera mujoco)"
+            "--measurements",
+            default=None,
+            help="range,camera (default: each world's measurement.kind from the settings; auto = "
+            "range in the synthetic world, camera in MuJoCo)",
         )
         c.add_argument(
             "--initial-errors",
@@ -121,15 +148,34 @@ def _build_parser() -> argparse.ArgumentParser:
         c.add_argument("--seed", default="0", help="base seed (default 0)")
         c.add_argument("--steps", default=None, help="synthetic: planned views per run (default 30)")
         c.add_argument("--views", default=None, help="mujoco: most planned views per run (default 15)")
-        c.add_argument("--approach", action="store_true", help="approach mode (eq. 13 term on)")
+        c.add_argument(
+            "--approach", action="store_true", help="approach mode (eq. 13 term; default episode.approach)"
+        )
         c.add_argument(
             "--recovered-mm", default="30", help="a run 'recovered' below this final error (default 30)"
         )
         c.add_argument("--config", default=None, help="TOML file of settings (sections as in bve_mj.config)")
         c.add_argument("--workers", default=None, help="local processes (default: all cores)")
         c.add_argument("--scheduler", default=None, help="Dask distributed scheduler address instead")
-        c.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+        c.add_argument(
+            "--no-plots", action="store_true", help="skip the PNG figures (skipped anyway without matplotlib)"
+        )
         c.add_argument("--quiet", action="store_true", help="no progress on stderr, no per-cell table")
+    sc = sub.add_parser(
+        "scenarios",
+        help="the greenhouse scenario suite over seeds: the table users judge the project by",
+        description="Run every named scenario (examples/scenarios/suite/*.toml) over seeded episodes.",
+    )
+    sc.add_argument("--only", default=None, help="comma-separated scenario names (default: all)")
+    sc.add_argument("--seeds", default="20", help="episodes per scenario (default 20)")
+    sc.add_argument("--seed", default="0", help="base seed (default 0)")
+    sc.add_argument(
+        "--measurement", default=None, help="camera or range for every scenario (default: each file's)"
+    )
+    sc.add_argument("--dir", default=None, help="a folder of scenario TOML files instead of the suite")
+    sc.add_argument("--workers", default=None, help="local processes (default: all cores)")
+    sc.add_argument("--json", default=None, help="write per-scenario metrics and episode rows here")
+    sc.add_argument("--quiet", action="store_true", help="no progress on stderr")
     res = sub.add_parser(
         "results",
         help="run (or resume) the results campaigns and write docs/results.md with its figures",
@@ -142,11 +188,21 @@ def _build_parser() -> argparse.ArgumentParser:
     res.add_argument("--recover-runs", default="10", help="runs per initial error (default 10)")
     res.add_argument("--recover-grid", default="0:0.5:0.01", help="initial errors [m] (default 0:0.5:0.01)")
     res.add_argument("--experiments", default="E1,E2,E3,E4,E5,E6,E7,E8,E9,E10", help="comma-separated")
+    res.add_argument("--scenario-seeds", default="20", help="episodes per scenario of the suite (default 20)")
     res.add_argument("--seed", default="0", help="base seed (default 0)")
     res.add_argument("--workers", default=None, help="local processes (default: all cores)")
     res.add_argument("--scheduler", default=None, help="Dask distributed scheduler address instead")
     res.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return parser
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("bve_mj")
+    except PackageNotFoundError:  # pragma: no cover (run from a source tree, not installed)
+        return "unknown (not installed)"
 
 
 def _int_arg(name: str, text: str | None, minimum: int) -> int | None:
@@ -234,55 +290,102 @@ def format_table(summaries: dict[str, Any], paper: dict[str, dict[str, float]]) 
     return lines
 
 
+def _given(**values: object) -> dict[str, object]:
+    """The options the user gave (not None): only these override the settings file."""
+    return {k: v for k, v in values.items() if v is not None}
+
+
+def paper_settings(args: argparse.Namespace) -> Settings:
+    """``bve-mj paper``'s settings: the ``--config`` file (or the defaults), then the options
+    given on the command line, resolved for the synthetic world."""
+    from bve_mj.config import Settings, load_settings
+    from bve_mj.experiments import with_overrides
+
+    settings = load_settings(args.config) if args.config else Settings()
+    settings = with_overrides(
+        settings,
+        measurement=_given(kind=args.measurement),
+        planner=_given(kind=args.planner, planning_model=args.planning_model, optimiser=args.optimiser),
+        protocol=_given(steps=_int_arg("steps", args.steps, 1)),
+        robot=_given(name=args.robot, joint_limits=args.joint_limits, formulation=args.formulation),
+    )
+    return settings.for_world("synthetic")
+
+
+def episode_cli_settings(args: argparse.Namespace) -> Settings:
+    """``bve-mj episode``'s settings: the ``--config`` file (or the defaults), then the options
+    given on the command line. :func:`bve_mj.mujoco_episode.run_mujoco_episode` resolves the
+    closed loop's defaults, the same for the CLI and the Python API."""
+    from bve_mj.config import SensorConfig, Settings, load_settings
+    from bve_mj.experiments import with_overrides
+
+    settings = load_settings(args.config) if args.config else Settings()
+    settings = with_overrides(
+        settings,
+        episode=_given(
+            experiment=args.experiment,
+            views=_int_arg("views", args.views, 1),
+            initial_error_m=_float_arg("initial-error", args.initial_error, 0.0),
+            approach=True if args.approach else None,
+        ),
+        planner=_given(kind=args.planner, planning_model=args.planning_model),
+        measurement=_given(kind=args.measurement),
+        robot=_given(name=args.robot),
+    )
+    if args.realistic:
+        settings = dataclasses.replace(settings, sensor=SensorConfig.realistic())
+    return settings
+
+
+def campaign_inputs(args: argparse.Namespace) -> tuple[Settings, CampaignSpec]:
+    """``bve-mj campaign``/``recoverability``: the settings (file, then ``--steps``/``--views``)
+    and the spec; axes not given take each world's value from the settings."""
+    from bve_mj.campaign import CampaignSpec, parse_grid
+    from bve_mj.config import Settings, load_settings
+    from bve_mj.experiments import parse_experiments, with_overrides
+
+    settings = load_settings(args.config) if args.config else Settings()
+    settings = with_overrides(
+        settings,
+        protocol=_given(steps=_int_arg("steps", args.steps, 1)),
+        episode=_given(views=_int_arg("views", args.views, 1)),
+    )
+    recovered = _float_arg("recovered-mm", args.recovered_mm, 0.0, strict=True)
+    spec = CampaignSpec(
+        experiments=tuple(e.name for e in parse_experiments(args.experiments)),
+        worlds=tuple(args.worlds.split(",")),  # validated by CampaignSpec
+        planners=tuple(args.planners.split(",")),
+        measurements=tuple(args.measurements.split(",")) if args.measurements is not None else (),
+        initial_errors_m=parse_grid(args.initial_errors) if args.initial_errors is not None else (),
+        runs=_int_arg("runs", args.runs, 1) or 1,
+        seed=_int_arg("seed", args.seed, 0) or 0,
+        approach=True if args.approach else None,
+        recovered_mm=recovered or 30.0,
+    )
+    return settings, spec
+
+
 def _cmd_paper(args: argparse.Namespace) -> int:
-    from bve_mj.config import RobotConfig, Settings, describe, load_settings
+    from bve_mj.config import describe
     from bve_mj.experiments import (
         PAPER_RESULTS,
         parse_experiments,
         run_table,
         table_json,
-        with_overrides,
     )
 
     experiments = parse_experiments(args.experiments)
     runs = _int_arg("runs", args.runs, 1) or 100
     seed = _int_arg("seed", args.seed, 0) or 0
-    steps = _int_arg("steps", args.steps, 1)
     workers = _int_arg("workers", args.workers, 1)
     json_path = _check_output_path("json", args.json)
-    settings = load_settings(args.config) if args.config else Settings()
-    planner = {
-        k: v
-        for k, v in (
-            ("kind", args.planner),
-            ("planning_model", args.planning_model),
-            ("optimiser", args.optimiser),
-        )
-        if v is not None
-    }
-    settings = with_overrides(
-        settings,
-        measurement={"kind": args.measurement} if args.measurement else {},
-        planner=planner,
-        protocol={"steps": steps} if steps else {},
-    )
-    if args.robot or args.joint_limits or args.formulation:
-        robot = dict(dataclasses.asdict(settings.robot))
-        if args.robot:
-            robot["name"] = args.robot
-            if args.robot != "manipulator_h" and not args.joint_limits:
-                robot["joint_limits"] = "urdf"
-        if args.joint_limits:
-            robot["joint_limits"] = args.joint_limits
-        if args.formulation:
-            robot["formulation"] = args.formulation
-        settings = dataclasses.replace(settings, robot=RobotConfig(**robot))
+    settings = paper_settings(args)
     p = settings.planner
     print(
         f"bve-mj paper: synthetic protocol; measurement={settings.measurement.kind}, planner={p.kind}, "
         f"planning model={p.planning_model}, optimiser={p.optimiser}; {runs} runs, seed {seed}, "
         f"{settings.protocol.steps} steps; arm (E5, E10): {settings.robot.name}, "
-        f"{settings.robot.joint_limits} limits, {settings.robot.formulation} formulation"
+        f"{settings.robot.limit_set} limits, {settings.robot.formulation} formulation"
     )
     t0 = time.perf_counter()
     summaries = run_table(
@@ -307,12 +410,9 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 
 def _cmd_episode(args: argparse.Namespace) -> int:
-    from bve_mj.config import RobotConfig, SensorConfig, Settings, load_settings
     from bve_mj.errors import ConfigError
-    from bve_mj.experiments import with_overrides
 
     seed = _int_arg("seed", args.seed, 0) or 0
-    views = _int_arg("views", args.views, 1)
     json_path = _check_output_path("json", args.json)
     video_path = _check_output_path("video", args.video)
     if video_path is not None and video_path.suffix.lower() != ".mp4":
@@ -322,29 +422,7 @@ def _cmd_episode(args: argparse.Namespace) -> int:
         from bve_mj.plots import require_matplotlib
 
         require_matplotlib("plots", args.plots)
-    settings = load_settings(args.config) if args.config else Settings()
-    initial_error = _float_arg("initial-error", args.initial_error, 0.0)
-    episode = {
-        k: v
-        for k, v in (("experiment", args.experiment), ("views", views), ("initial_error_m", initial_error))
-        if v is not None
-    }
-    if args.approach:
-        episode["approach"] = True
-    planner = {
-        k: v for k, v in (("kind", args.planner), ("planning_model", args.planning_model)) if v is not None
-    }
-    settings = with_overrides(
-        settings, episode=episode, planner=planner, measurement={"kind": args.measurement}
-    )
-    if args.robot:
-        limits = settings.robot.joint_limits if args.robot == "manipulator_h" else "urdf"
-        settings = dataclasses.replace(
-            settings,
-            robot=RobotConfig(name=args.robot, joint_limits=limits, formulation=settings.robot.formulation),
-        )
-    if args.realistic:
-        settings = dataclasses.replace(settings, sensor=SensorConfig.realistic())
+    settings = episode_cli_settings(args)
 
     import numpy as np
 
@@ -365,33 +443,30 @@ def _cmd_episode(args: argparse.Namespace) -> int:
     )
     if not args.quiet:
         print(
-            f"{'view':>4} {'plan':>13} {'detection':>26} {'error mm':>9} {'σmax mm':>8} {'cam-fruit m':>11}"
+            f"{'view':>4} {'plan':>13} {'detection':>22} {'measured':>8} {'true':>6} "
+            f"{'error':>8} {'σmax':>7}\n{'':>4} {'':>13} {'':>22} {'range m':>8} {'range m':>6} "
+            f"{'mm':>8} {'mm':>7}"
         )
         for v, rec in zip(doc["views"], result.result.views, strict=True):
             det = v.get("detection", {})
-            shown = f"r {det['radius_px']:.1f} px" if "radius_px" in det else str(det.get("none", "-"))[:26]
+            shown = f"r {det['radius_px']:.1f} px" if "radius_px" in det else str(det.get("none", "-"))[:22]
+            measured = f"{det['range_m']:8.3f}" if "range_m" in det else f"{'-':>8}"
             sig = 1e3 * float(np.sqrt(np.linalg.eigvalsh(rec.belief.cov)[-1]))
-            dist = float(np.linalg.norm(rec.p_world_camera - result.truth))
+            true_range = float(np.linalg.norm(rec.p_world_camera - result.truth))
             print(
-                f"{v['view']:>4} {v['plan_status'] or 'start'!s:>13} {shown:>26} {v['error_mm']:9.2f} "
-                f"{sig:8.2f} {dist:11.3f}"
+                f"{v['view']:>4} {v['plan_status'] or 'start'!s:>13} {shown:>22} {measured} "
+                f"{true_range:6.3f} {v['error_mm']:8.2f} {sig:7.2f}"
             )
-    t = [vv.get("timings_s", {}) for vv in doc["views"][1:]]
-    plan = [vv["plan_s"] for vv in doc["views"][1:]]
-    stage = {k: 1e3 * float(np.median([x.get(k, 0.0) for x in t])) if t else 0.0
-             for k in ("ik_s", "control_s", "render_s", "detect_s")}  # fmt: skip
     print(
         f"outcome: {doc['outcome']}; final error {doc['final_error_mm']:.2f} mm "
-        f"(NEES {doc['final_nees']:.2f}) after {len(doc['views'])} views; wall {doc['wall_s']:.2f} s; "
-        f"median per view: plan {1e3 * float(np.median(plan)) if plan else 0.0:.1f} ms, "
-        f"IK {stage['ik_s']:.1f} ms, control {stage['control_s']:.1f} ms, "
-        f"render {stage['render_s']:.1f} ms, detect {stage['detect_s']:.1f} ms"
+        f"(NEES {doc['final_nees']:.2f}) after {len(doc['views'])} views; wall {doc['wall_s']:.2f} s"
     )
+    print("median per view: " + _stage_times(doc["views"][1:]))
     counts = result.result.event_counts()
     if counts:
         print("events: " + ", ".join(f"{k} x{n}" for k, n in sorted(counts.items())))
-    if doc["outcome"] == "unreachable":
-        print("the arm cannot reach a pose that looks at the fruit's estimate: nothing was measured")
+    if doc["outcome"] in OUTCOME_NOTES:
+        print(OUTCOME_NOTES[doc["outcome"]])
     if video_path is not None:
         print(f"wrote {video_path} ({frames} frames)")
     if plots_prefix is not None:
@@ -403,6 +478,27 @@ def _cmd_episode(args: argparse.Namespace) -> int:
         write_json_atomic(json_path, doc)
         print(f"wrote {json_path}")
     return EXIT_NOT_LOCALISED if doc["outcome"] in NOT_LOCALISED else EXIT_OK
+
+
+def _stage_times(views: Sequence[dict[str, Any]]) -> str:
+    """Median time per view of each stage [ms]: planning (with the joint-space BVE's IK),
+    IK in the move (only where a plan carried no joint angles), physics, video recording,
+    rendering, detection."""
+    import numpy as np
+
+    def median_ms(values: Sequence[float]) -> float:
+        return 1e3 * float(np.median(values)) if values else 0.0
+
+    t = [v.get("timings_s", {}) for v in views]
+    parts = [f"plan {median_ms([v['plan_s'] for v in views]):.1f} ms (IK included)"]
+    if any(x.get("ik_s", 0.0) > 1e-4 for x in t):
+        parts.append(f"IK in move {median_ms([x.get('ik_s', 0.0) for x in t]):.1f} ms")
+    parts.append(f"control {median_ms([x.get('control_s', 0.0) for x in t]):.1f} ms")
+    if any(x.get("record_s", 0.0) > 0.0 for x in t):
+        parts.append(f"video recording {median_ms([x.get('record_s', 0.0) for x in t]):.1f} ms")
+    parts.append(f"render {median_ms([x.get('render_s', 0.0) for x in t]):.1f} ms")
+    parts.append(f"detect {median_ms([x.get('detect_s', 0.0) for x in t]):.1f} ms")
+    return ", ".join(parts)
 
 
 def _float_arg(name: str, text: str | None, minimum: float, strict: bool = False) -> float | None:
@@ -421,51 +517,21 @@ def _float_arg(name: str, text: str | None, minimum: float, strict: bool = False
 
 
 def _cmd_campaign(args: argparse.Namespace) -> int:
-    from bve_mj.campaign import CampaignSpec, parse_grid, run_campaign
+    from bve_mj.campaign import run_campaign
     from bve_mj.campaign_report import format_cells, write_campaign_outputs
-    from bve_mj.config import Settings, load_settings
-    from bve_mj.experiments import parse_experiments, with_overrides
 
-    experiments = tuple(e.name for e in parse_experiments(args.experiments))
-    runs = _int_arg("runs", args.runs, 1)
-    seed = _int_arg("seed", args.seed, 0) or 0
-    steps = _int_arg("steps", args.steps, 1)
-    views = _int_arg("views", args.views, 1)
     workers = _int_arg("workers", args.workers, 1)
-    recovered = _float_arg("recovered-mm", args.recovered_mm, 0.0, strict=True)
-    errors = parse_grid(args.initial_errors) if args.initial_errors is not None else ()
-    worlds = args.worlds
-    if args.measurements is None:
-        names = [w.strip() for w in worlds.split(",")]
-        measurements = ",".join(dict.fromkeys("camera" if w == "mujoco" else "range" for w in names))
-    else:
-        measurements = args.measurements
-    if not args.no_plots:
-        from bve_mj.plots import require_matplotlib
-
-        require_matplotlib(alternative=", or --no-plots")
-    spec = CampaignSpec(
-        experiments=experiments,
-        worlds=tuple(worlds.split(",")),  # validated by CampaignSpec
-        planners=tuple(args.planners.split(",")),
-        measurements=tuple(measurements.split(",")),
-        initial_errors_m=errors,
-        runs=runs or 1,
-        seed=seed,
-        approach=args.approach,
-        recovered_mm=recovered or 30.0,
-    )
-    settings = load_settings(args.config) if args.config else Settings()
-    settings = with_overrides(
-        settings,
-        protocol={"steps": steps} if steps else {},
-        episode={"views": views} if views else {},
-    )
+    settings, spec = campaign_inputs(args)
+    plots = not args.no_plots
+    if plots and importlib.util.find_spec("matplotlib") is None:
+        plots = False
+        print("bve-mj: matplotlib is not installed, so no figures (pip install 'bve_mj[plots]')")
     print(
         f"bve-mj {args.command}: {len(spec.cells(settings))} cells x {spec.runs} runs "
         f"(worlds {','.join(spec.worlds)}; experiments {','.join(spec.experiments)}; planners "
-        f"{','.join(spec.planners)}; measurements {','.join(spec.measurements)}; initial errors "
-        f"{_grid_text(spec.initial_errors_m)}), seed {seed} -> {args.out}"
+        f"{','.join(spec.planners)}; measurements {','.join(spec.measurements) or 'from settings'}; "
+        f"initial errors "
+        f"{_grid_text(spec.initial_errors_m)}), seed {spec.seed} -> {args.out}"
     )
     show = not args.quiet and sys.stderr.isatty()
     result = run_campaign(
@@ -481,7 +547,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         f"wall time {result.wall_s:.1f} s for {n} runs"
         + (f" ({n / result.wall_s:.2f} runs/s)" if n and result.wall_s > 0 else "")
     )
-    for path in write_campaign_outputs(result, plots=not args.no_plots):
+    for path in write_campaign_outputs(result, plots=plots):
         print(f"wrote {path}")
     if result.crashed:
         print(
@@ -509,6 +575,7 @@ def _cmd_results(args: argparse.Namespace) -> int:
         recover_grid=grid,
         experiments=tuple(e.name for e in parse_experiments(args.experiments)),
         seed=_int_arg("seed", args.seed, 0) or 0,
+        scenario_seeds=_int_arg("scenario-seeds", args.scenario_seeds, 1) or 1,
     )
     workers = _int_arg("workers", args.workers, 1)
     out = _check_output_path("out", args.out)
@@ -528,6 +595,39 @@ def _cmd_results(args: argparse.Namespace) -> int:
         progress=lambda _name: _progress(show),
     )  # fmt: skip
     print(f"wrote {len(written)} files in {time.perf_counter() - t0:.0f} s; the page: {out}")
+    return EXIT_OK
+
+
+def _cmd_scenarios(args: argparse.Namespace) -> int:
+    from bve_mj.errors import ConfigError
+    from bve_mj.scenarios import format_suite, load_suite, run_suite, suite_json
+
+    seeds = _int_arg("seeds", args.seeds, 1) or 1
+    seed = _int_arg("seed", args.seed, 0) or 0
+    workers = _int_arg("workers", args.workers, 1)
+    json_path = _check_output_path("json", args.json)
+    if args.measurement is not None and args.measurement not in ("camera", "range"):
+        raise ConfigError("measurement", args.measurement, "camera or range")
+    suite = load_suite(args.dir, args.only.split(",") if args.only is not None else None)
+    print(
+        f"bve-mj scenarios: {len(suite)} scenarios x {seeds} seeds (base seed {seed}), measurement "
+        f"{args.measurement or 'from each file'}"
+    )
+    show = not args.quiet and sys.stderr.isatty()
+    result = run_suite(
+        suite, seeds=seeds, seed=seed, measurement=args.measurement, workers=workers, progress=_progress(show)
+    )
+    for line in format_suite({sc.name: result.summary(sc.name) for sc in result.scenarios}):
+        print(line)
+    print(f"wall time {result.wall_s:.1f} s")
+    if json_path is not None:
+        write_json_atomic(json_path, suite_json(result))
+        print(f"wrote {json_path}")
+    if result.crashed:
+        print(f"bve-mj: {len(result.crashed)} episodes crashed:", file=sys.stderr)
+        for line in result.crashed[:5]:
+            print(f"  {line}", file=sys.stderr)
+        return EXIT_FAILURE
     return EXIT_OK
 
 
@@ -562,6 +662,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return _cmd_campaign(args)
             if args.command == "results":
                 return _cmd_results(args)
+            if args.command == "scenarios":
+                return _cmd_scenarios(args)
         raise _UsageError(f"bve-mj: unknown command {args.command!r}")  # pragma: no cover
     except _UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)

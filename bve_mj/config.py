@@ -50,13 +50,15 @@ __all__ = [
     "SceneConfig",
     "SensorConfig",
     "Settings",
+    "WorldName",
     "describe",
     "load_settings",
     "settings_from_dict",
     "settings_to_dict",
 ]
 
-MeasurementKind = Literal["range", "camera"]
+MeasurementKind = Literal["auto", "range", "camera"]
+WorldName = Literal["synthetic", "mujoco"]
 LossName = Literal["dispersion", "max_eigenvalue"]
 OptimiserName = Literal["slsqp", "trust-constr"]
 PlanningModel = Literal["paper", "consistent"]
@@ -160,11 +162,40 @@ class FruitPrior:
         ),
     )
 
+    shape_spread_rel: float = field(
+        default=0.0,
+        metadata=_why(
+            "non-spherical fruit: the apparent radius varies over viewing directions by +-this share "
+            "(uniform; e.g. 0.1 for a 1 : 1 : 0.8 spheroid), added to the range variance; 0 = spheres"
+        ),
+    )
+
     def __post_init__(self) -> None:
         _positive("fruit", "radius_m", self.radius_m)
-        _non_negative("fruit", "radius_spread_rel", self.radius_spread_rel)
-        if self.radius_spread_rel >= 1.0:
-            raise ConfigError("fruit.radius_spread_rel", self.radius_spread_rel, "a number in [0, 1)")
+        for name in ("radius_spread_rel", "shape_spread_rel"):
+            value = getattr(self, name)
+            _non_negative("fruit", name, value)
+            if value >= 1.0:
+                raise ConfigError(f"fruit.{name}", value, "a number in [0, 1)")
+
+    @classmethod
+    def for_scene(cls, scene: SceneConfig) -> FruitPrior:
+        """What the estimator assumes of a fruit of ``scene``'s type: the middle of its radius
+        range ± half its width, and a shape spread of half the largest departure of its shape
+        index from 1 (a spheroid looks up to that much larger or smaller than its equator)."""
+        lo, hi = scene.radius_range_m
+        s_lo, s_hi = scene.shape_index_range
+        return cls(
+            radius_m=0.5 * (lo + hi),
+            radius_spread_rel=min((hi - lo) / (hi + lo), 0.99),
+            shape_spread_rel=min(0.5 * max(abs(1.0 - s_lo), abs(1.0 - s_hi)), 0.99),
+        )
+
+    @property
+    def size_spread_rel(self) -> float:
+        """Standard deviation of the apparent size's relative error from the unknown radius and
+        shape: uniform ±s each, s/√3, combined in quadrature."""
+        return math.hypot(self.radius_spread_rel, self.shape_spread_rel) / math.sqrt(3.0)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -177,7 +208,13 @@ class MeasurementConfig:
     derivation with an explicit 3x3 (or diagonal) covariance in the camera frame.
     """
 
-    kind: MeasurementKind = field(default="range", metadata=_why("the paper's EKF measures range only"))
+    kind: MeasurementKind = field(
+        default="auto",
+        metadata=_why(
+            "auto: range in the synthetic world (the paper's EKF), camera (bearing + range) in the "
+            "rendered closed loop, where range alone cannot recover from the unknown fruit radius"
+        ),
+    )
     centre_sigma_px: float = field(
         default=1.0,
         metadata=_why("blob-centre error: sub-pixel fit plus segmentation bias and calibration", "px"),
@@ -398,10 +435,11 @@ class RobotConfig:
 
     name: RobotName = field(default="manipulator_h", metadata=_why("the paper's arm"))
     joint_limits: str = field(
-        default="emanual",
+        default="auto",
         metadata=_why(
             "Manipulator-H: emanual = ROBOTIS operating ranges (J1 +-pi, J3 -pi/2..3pi/4, ...); "
-            "urdf = the URDF's conservative +-pi/2. Other arms: urdf"
+            "urdf = the URDF's conservative +-pi/2. Other arms: urdf. auto: emanual for "
+            "manipulator_h, urdf for the others"
         ),
     )
     formulation: Formulation = field(
@@ -414,10 +452,19 @@ class RobotConfig:
     def __post_init__(self) -> None:
         _choice("robot", "name", self.name, RobotName)
         _choice("robot", "formulation", self.formulation, Formulation)
-        if self.joint_limits not in ("urdf", "emanual") or (
+        if self.joint_limits not in ("auto", "urdf", "emanual") or (
             self.joint_limits == "emanual" and self.name != "manipulator_h"
         ):
-            raise ConfigError("robot.joint_limits", self.joint_limits, "urdf, or emanual for manipulator_h")
+            raise ConfigError(
+                "robot.joint_limits", self.joint_limits, "auto, urdf, or emanual for manipulator_h"
+            )
+
+    @property
+    def limit_set(self) -> str:
+        """The joint limits in force: ``joint_limits`` with ``auto`` resolved for this arm."""
+        if self.joint_limits == "auto":
+            return "emanual" if self.name == "manipulator_h" else "urdf"
+        return self.joint_limits
 
 
 def _range(
@@ -433,53 +480,258 @@ def _range(
     return (a, b)
 
 
+FruitType = Literal["cherry", "cocktail", "round", "beefsteak", "plum"]
+TrussLayout = Literal["chain", "cluster"]
+RipenessName = Literal["green", "breaker", "turning", "pink", "light_red", "red"]
+OtherTrussesRipeness = Literal["unripe", "mixed"]
+
+FRUIT_TYPE_DIAMETER_M: dict[str, tuple[float, float]] = {
+    "cherry": (0.015, 0.030),
+    "cocktail": (0.030, 0.045),
+    "round": (0.047, 0.067),
+    "beefsteak": (0.067, 0.100),
+    "plum": (0.035, 0.050),
+}
+"""Equatorial (horizontal) diameter range of each fruit type [m] (docs/greenhouse.md)."""
+
+FRUIT_TYPE_SHAPE_INDEX: dict[str, tuple[float, float]] = {
+    "cherry": (0.90, 1.00),
+    "cocktail": (0.85, 1.00),
+    "round": (0.80, 0.95),
+    "beefsteak": (0.60, 0.80),
+    "plum": (1.20, 1.60),
+}
+"""Shape index (height / width) range of each fruit type (docs/greenhouse.md)."""
+
+
+def _int_at_least(section: str, name: str, value: Any, low: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ConfigError(f"{section}.{name}", value, f"an integer >= {low}")
+
+
+def _optional_range(
+    section: str, name: str, value: Any, lo: float = -math.inf, hi: float = math.inf
+) -> tuple[float, float] | None:
+    return None if value is None else _range(section, name, value, lo, hi)
+
+
 @dataclass(frozen=True, kw_only=True)
 class SceneConfig:
-    """The greenhouse scene: the arm on a pedestal before a tomato row (robot base frame)."""
+    """The greenhouse scene: the arm on a pedestal before a high-wire tomato row (robot base
+    frame). Plants, trusses, fruit, leaves and light are drawn from the scene's seed within
+    these settings; ``bve_mj.sim.scene`` documents the model."""
 
     pedestal_height_m: float = field(
         default=0.75,
         metadata=_why("robot base above the floor: puts trusses at 0.0-0.45 m within reach", "m"),
     )
     row_x_m: float = field(default=0.50, metadata=_why("stem line of the plant row in front of the arm", "m"))
-    plants: int = field(default=5, metadata=_why("stems along the row, 0.4 m apart"))
-    leaves_per_plant: int = field(default=16, metadata=_why("leaflets per stem"))
+    plants: int = field(default=5, metadata=_why("stems along the row, 0.3-0.5 m apart"))
     target_x_m: tuple[float, float] = field(
         default=(0.40, 0.45), metadata=_why("ripe target centre x: on the robot side of the row", "m")
     )
     target_y_m: tuple[float, float] = field(default=(-0.20, 0.20), metadata=_why("target centre y", "m"))
     target_z_m: tuple[float, float] = field(default=(0.05, 0.40), metadata=_why("target centre z", "m"))
-    fruit_radius_m: tuple[float, float] = field(
-        default=(0.025, 0.045), metadata=_why("greenhouse tomato radii", "m")
+    fruit_type: FruitType = field(
+        default="round",
+        metadata=_why(
+            "cherry, cocktail, round, beefsteak or plum: sets the default size and shape-index "
+            "ranges (docs/greenhouse.md)"
+        ),
     )
-    distractors: int = field(default=4, metadata=_why("unripe green and orange fruit near the target"))
-    light_intensity: tuple[float, float] = field(
-        default=(0.55, 0.9), metadata=_why("diffuse intensity of the sun light, randomised")
+    fruit_radius_m: tuple[float, float] | None = field(
+        default=None,
+        metadata=_why(
+            "equatorial radius range of the fruit, each drawn within it; None = from fruit_type "
+            "(round: 23.5-33.5 mm)",
+            "m",
+        ),
+    )
+    shape_index: tuple[float, float] | None = field(
+        default=None,
+        metadata=_why(
+            "height / width range, each fruit drawn within it (< 1 flattened, > 1 elongated); "
+            "None = from fruit_type (round: 0.80-0.95)"
+        ),
+    )
+    trusses: int = field(
+        default=3,
+        metadata=_why("trusses near the target, one of them the target's, on the plants around it"),
+    )
+    fruit_per_truss: int = field(
+        default=5, metadata=_why("fruit on each truss (round 4-8, cocktail 8-14, cherry 12-25)")
+    )
+    target_index: int = field(
+        default=0,
+        metadata=_why("which fruit of its truss is the target, 0 = the one nearest the stem (ripens first)"),
+    )
+    truss_layout: TrussLayout = field(
+        default="chain",
+        metadata=_why(
+            "chain: fruit one after another along the bending rachis, touching; cluster: fruit "
+            "alternating on both sides of it (two rows), touching"
+        ),
+    )
+    ripeness: tuple[RipenessName, ...] = field(
+        default=(),
+        metadata=_why(
+            "ripeness class of each fruit of the target's truss, index 0 nearest the stem "
+            "(green, breaker, turning, pink, light_red, red); empty = drawn, ripening from the "
+            "stem outward: fruit inward of the target 0-1 classes riper each, the one just outward "
+            "3-4 classes less ripe (the target is its truss's ripe one), each further one 0-1 less"
+        ),
+    )
+    target_ripeness: RipenessName = field(
+        default="red", metadata=_why("the target's class when ripeness is drawn (ignored when it is given)")
+    )
+    other_trusses_ripeness: OtherTrussesRipeness = field(
+        default="unripe",
+        metadata=_why(
+            "the other trusses, ripening from the stem outward: unripe = first fruit green, "
+            "breaker or turning (no red beside the target); mixed = first fruit of any class"
+        ),
+    )
+    leaf_density: float = field(
+        default=1.0,
+        metadata=_why(
+            "scales the number of compound leaves (1 = one every 5-8 cm of stem above the "
+            "stripped ripe zone; 0 = none)"
+        ),
+    )
+    leaves_per_plant: int | None = field(
+        default=None,
+        metadata=_why(
+            "legacy (leaflets per stem in the old scene): when set, scales leaf_density by it / 16"
+        ),
+    )
+    distractors: int | None = field(
+        default=None,
+        metadata=_why(
+            "legacy: when set, this many fruit in all on max(1, trusses - 1) other trusses (0 = only "
+            "the target's truss); None = trusses - 1 other trusses of fruit_per_truss fruit each"
+        ),
+    )
+    sun_azimuth_deg: tuple[float, float] = field(
+        default=(135.0, 225.0),
+        metadata=_why(
+            "where the sun is, drawn in this range: 0 = behind the row (+x, backlit fruit), "
+            "180 = behind the robot (front lit), 90 = +y",
+            "deg",
+        ),
+    )
+    sun_elevation_deg: tuple[float, float] = field(
+        default=(40.0, 70.0), metadata=_why("sun above the horizon, drawn in this range", "deg")
+    )
+    sun_intensity: tuple[float, float] = field(
+        default=(0.45, 0.75),
+        metadata=_why("diffuse intensity of the sun (direct light), drawn in this range"),
+    )
+    light_intensity: tuple[float, float] | None = field(
+        default=None, metadata=_why("legacy name of sun_intensity: when set, it replaces it")
+    )
+    sky_intensity: float = field(
+        default=0.6,
+        metadata=_why("diffuse sky through the glass: uniform ambient plus soft light from above"),
+    )
+    backlight: float = field(
+        default=0.0,
+        metadata=_why("intensity of a low light from behind the row towards the camera; 0 = none"),
     )
     shadows: bool = field(
-        default=False, metadata=_why("the sun casts shadows: several times the render cost on a CPU")
+        default=False, metadata=_why("the sun casts hard shadows: several times the render cost on a CPU")
+    )
+    headlight: bool = field(
+        default=False, metadata=_why("a light on the camera (MuJoCo's headlight), like a flash or ring light")
     )
 
     def __post_init__(self) -> None:
         _positive("scene", "pedestal_height_m", self.pedestal_height_m)
         _positive("scene", "row_x_m", self.row_x_m)
         _positive_int("scene", "plants", self.plants)
+        _positive_int("scene", "trusses", self.trusses)
+        _positive_int("scene", "fruit_per_truss", self.fruit_per_truss)
+        _int_at_least("scene", "target_index", self.target_index, 0)
+        if self.target_index >= self.fruit_per_truss:
+            raise ConfigError(
+                "scene.target_index",
+                self.target_index,
+                f"an integer < fruit_per_truss = {self.fruit_per_truss}",
+            )
         for name in ("leaves_per_plant", "distractors"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ConfigError(f"scene.{name}", v, "an integer >= 0")
+            if v is not None:
+                _int_at_least("scene", name, v, 0)
         for name in ("target_x_m", "target_y_m", "target_z_m"):
             object.__setattr__(self, name, _range("scene", name, getattr(self, name)))
+        _choice("scene", "fruit_type", self.fruit_type, FruitType)
+        _choice("scene", "truss_layout", self.truss_layout, TrussLayout)
+        _choice("scene", "target_ripeness", self.target_ripeness, RipenessName)
+        _choice("scene", "other_trusses_ripeness", self.other_trusses_ripeness, OtherTrussesRipeness)
         object.__setattr__(
-            self, "fruit_radius_m", _range("scene", "fruit_radius_m", self.fruit_radius_m, 1e-3, 0.15)
+            self,
+            "fruit_radius_m",
+            _optional_range("scene", "fruit_radius_m", self.fruit_radius_m, 1e-3, 0.15),
+        )
+        shape = _optional_range("scene", "shape_index", self.shape_index, 0.0, 5.0)
+        if shape is not None and shape[0] <= 0.0:
+            raise ConfigError("scene.shape_index", self.shape_index, "a pair 0 < low <= high <= 5")
+        object.__setattr__(self, "shape_index", shape)
+        classes = get_args(RipenessName)
+        given = self.ripeness
+        if isinstance(given, (str, bytes, Mapping)) or not isinstance(given, (list, tuple)):
+            raise ConfigError(
+                "scene.ripeness", given, "a list of ripeness classes (" + ", ".join(classes) + ")"
+            )
+        for name in given:
+            if name not in classes:
+                raise ConfigError("scene.ripeness", list(given), "ripeness classes: " + ", ".join(classes))
+        if given and len(given) != self.fruit_per_truss:
+            raise ConfigError(
+                "scene.ripeness", list(given), f"{self.fruit_per_truss} classes (fruit_per_truss), or none"
+            )
+        object.__setattr__(self, "ripeness", tuple(given))
+        _non_negative("scene", "leaf_density", self.leaf_density)
+        object.__setattr__(
+            self, "sun_azimuth_deg", _range("scene", "sun_azimuth_deg", self.sun_azimuth_deg, -360.0, 360.0)
         )
         object.__setattr__(
-            self, "light_intensity", _range("scene", "light_intensity", self.light_intensity, 0.0)
+            self, "sun_elevation_deg", _range("scene", "sun_elevation_deg", self.sun_elevation_deg, 0.0, 90.0)
         )
-        if not isinstance(self.shadows, bool):
-            raise ConfigError("scene.shadows", self.shadows, "true or false")
+        object.__setattr__(self, "sun_intensity", _range("scene", "sun_intensity", self.sun_intensity, 0.0))
+        object.__setattr__(
+            self, "light_intensity", _optional_range("scene", "light_intensity", self.light_intensity, 0.0)
+        )
+        _non_negative("scene", "sky_intensity", self.sky_intensity)
+        _non_negative("scene", "backlight", self.backlight)
+        for name in ("shadows", "headlight"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"scene.{name}", getattr(self, name), "true or false")
         if self.target_x_m[1] >= self.row_x_m:
             raise ConfigError("scene.target_x_m", self.target_x_m, f"values below row_x_m = {self.row_x_m}")
+
+    @property
+    def radius_range_m(self) -> tuple[float, float]:
+        """Equatorial fruit radius range [m]: ``fruit_radius_m``, else half ``fruit_type``'s diameters."""
+        if self.fruit_radius_m is not None:
+            return self.fruit_radius_m
+        lo, hi = FRUIT_TYPE_DIAMETER_M[self.fruit_type]
+        return (lo / 2.0, hi / 2.0)
+
+    @property
+    def shape_index_range(self) -> tuple[float, float]:
+        """Height / width range: ``shape_index``, else ``fruit_type``'s."""
+        return self.shape_index if self.shape_index is not None else FRUIT_TYPE_SHAPE_INDEX[self.fruit_type]
+
+    @property
+    def sun_intensity_range(self) -> tuple[float, float]:
+        """The sun's intensity range: ``light_intensity`` (legacy) when set, else ``sun_intensity``."""
+        return self.light_intensity if self.light_intensity is not None else self.sun_intensity
+
+    @property
+    def leaf_scale(self) -> float:
+        """``leaf_density``, times ``leaves_per_plant / 16`` when the legacy setting is given."""
+        legacy = 1.0 if self.leaves_per_plant is None else self.leaves_per_plant / 16.0
+        return self.leaf_density * legacy
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -510,7 +762,8 @@ class SensorConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class DetectorConfig:
-    """Colour segmentation and circle (cone) fit of the target tomato."""
+    """Colour segmentation, separation of touching fruit (outline arcs grouped into circles),
+    and circle (cone) fit of the target tomato, with the checks that refuse a poor one."""
 
     red_hue_max: int = field(default=8, metadata=_why("ripe red: OpenCV hue <= this or >= red_hue_min_wrap"))
     red_hue_min_wrap: int = field(default=170, metadata=_why("ripe red wraps around hue 180"))
@@ -522,6 +775,79 @@ class DetectorConfig:
         default=1.5,
         metadata=_why("boundary points this far inside the fitted circle are occluder edges", "px"),
     )
+    ripe_class: str | None = field(
+        default=None,
+        metadata=_why(
+            "the least ripe class that counts as ripe (red, light_red, pink, turning; orange = turning): "
+            "its hue limit (ripe_hue_limits) replaces red_hue_max; None: red_hue_max decides"
+        ),
+    )
+    corner_px: float = field(
+        default=1.5,
+        metadata=_why(
+            "concave corners of a ripe blob's outline deeper than this cut it into arcs (where two "
+            "touching fruit meet, a calyx notch, a leaf tip)",
+            "px",
+        ),
+    )
+    junction_margin: int = field(
+        default=4,
+        metadata=_why("outline points left out at each end of an arc at a corner (blended with a neighbour)"),
+    )
+    arc_tol_px: float = field(
+        default=2.0,
+        metadata=_why(
+            "an arc belongs to a fruit's circle when half its points or more lie within this of it "
+            "(or 4% of the radius) and almost none further outside",
+            "px",
+        ),
+    )
+    min_arc_deg: float = field(
+        default=150.0,
+        metadata=_why("fewest degrees of the target's outline seen (after trimming) to measure it", "deg"),
+    )
+    max_fit_rms_px: float = field(
+        default=0.8, metadata=_why("largest rms residual of the silhouette points kept in the fit", "px")
+    )
+    max_fit_sigma_px: float = field(
+        default=0.5,
+        metadata=_why(
+            "largest 1-sigma centre uncertainty of the fit itself (short or ragged arcs), half the "
+            "centre error a measurement claims; a looser fit is refused rather than reported",
+            "px",
+        ),
+    )
+    max_outside_share: float = field(
+        default=0.05,
+        metadata=_why(
+            "largest share of the target's outline points more than outlier_px outside its fitted "
+            "circle (more: the outline is not one fruit, a merged blob)"
+        ),
+    )
+    min_radius_px: float = field(
+        default=6.0,
+        metadata=_why(
+            "smallest apparent radius of a fruit (a 15 mm cherry at 1.2 m); smaller circles are specks "
+            "of colour",
+            "px",
+        ),
+    )
+    size_tolerance_rel: float = field(
+        default=0.5,
+        metadata=_why(
+            "when the caller passes the expected apparent radius, a fitted radius off by more than this "
+            "share (either way) is not the target (a fragment, a merged blob, another fruit)"
+        ),
+    )
+
+    @staticmethod
+    def ripe_hue_limits() -> dict[str, int]:
+        """The OpenCV hue (0-180) up to which the coloured skin of each ripeness class reaches,
+        measured on the scene's rendered skins (``bve_mj.sim.textures``) in white light: red and
+        the red of light red 1-8, the yellow-orange of light red and pink up to 30-34, turning
+        (and the legacy orange) 33-37; breaker and green 38-45 with the stems, leaves 45-60,
+        never ripe. ``ripe_class`` picks one."""
+        return {"red": 8, "light_red": 30, "pink": 34, "turning": 37, "orange": 37}
 
     def __post_init__(self) -> None:
         for name in ("red_hue_max", "red_hue_min_wrap", "min_saturation", "min_value"):
@@ -531,6 +857,24 @@ class DetectorConfig:
         _positive_int("detector", "min_area_px", self.min_area_px)
         _positive_int("detector", "min_boundary_points", self.min_boundary_points)
         _positive("detector", "outlier_px", self.outlier_px)
+        limits = self.ripe_hue_limits()
+        known = isinstance(self.ripe_class, str) and self.ripe_class in limits
+        if self.ripe_class is not None and not known:
+            raise ConfigError("detector.ripe_class", self.ripe_class, "one of " + ", ".join(limits))
+        _open_interval("detector", "max_outside_share", self.max_outside_share, 0.0, 1.0, "a share in (0, 1)")
+        _positive("detector", "corner_px", self.corner_px)
+        _positive_int("detector", "junction_margin", self.junction_margin)
+        _positive("detector", "arc_tol_px", self.arc_tol_px)
+        _open_interval("detector", "min_arc_deg", self.min_arc_deg, 0.0, 360.0, "a number in (0, 360)")
+        _positive("detector", "max_fit_rms_px", self.max_fit_rms_px)
+        _positive("detector", "max_fit_sigma_px", self.max_fit_sigma_px)
+        _non_negative("detector", "min_radius_px", self.min_radius_px)
+        _positive("detector", "size_tolerance_rel", self.size_tolerance_rel)
+
+    @property
+    def ripe_hue_max(self) -> int:
+        """The hue limit of ripe pixels: that of ``ripe_class``, else ``red_hue_max``."""
+        return self.red_hue_max if self.ripe_class is None else self.ripe_hue_limits()[self.ripe_class]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -693,9 +1037,30 @@ class Settings:
         sigma_lateral = rho * m.centre_sigma_px / f
         alpha = math.asin(min(self.fruit.radius_m / rho, 1.0))
         radius_px = f * math.tan(alpha)
-        rel = math.hypot(self.fruit.radius_spread_rel / math.sqrt(3.0), m.radius_sigma_px / radius_px)
+        rel = math.hypot(self.fruit.size_spread_rel, m.radius_sigma_px / radius_px)
         sigma_range = rho * rel
         return np.diag([sigma_range**2, sigma_lateral**2, sigma_lateral**2])
+
+    def for_world(self, world: WorldName) -> Settings:
+        """These settings with the world-dependent defaults resolved. Every runner calls this
+        first, so the Python API, the CLI and campaigns agree:
+
+        - ``measurement.kind = "auto"`` becomes ``range`` in the synthetic world (the paper's
+          EKF) and ``camera`` in MuJoCo;
+        - in MuJoCo, a ``fruit`` section left at its defaults (the paper's r_k = 35 mm ±15%)
+          becomes the prior of the scene's fruit type (:meth:`FruitPrior.for_scene`): the
+          estimator knows the variety it is picking, not each fruit's size. Any value set in
+          ``[fruit]`` keeps the whole section as given.
+        """
+        if world not in get_args(WorldName):
+            raise ConfigError("world", world, "one of " + ", ".join(get_args(WorldName)))
+        out = self
+        if self.measurement.kind == "auto":
+            kind: MeasurementKind = "range" if world == "synthetic" else "camera"
+            out = dataclasses.replace(out, measurement=dataclasses.replace(out.measurement, kind=kind))
+        if world == "mujoco" and self.fruit == FruitPrior():
+            out = dataclasses.replace(out, fruit=FruitPrior.for_scene(self.scene))
+        return out
 
     @property
     def prior_source(self) -> Literal["filter", "views"]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +17,7 @@ from bve_mj.estimation.ekf import predict, update
 from bve_mj.planning.plan import Planner, PlanStatus, ViewPlan
 from bve_mj.sim.world import Observation, World
 
-__all__ = ["EpisodeResult", "StopRules", "ViewRecord", "run_episode"]
+__all__ = ["EpisodeResult", "StopRules", "ViewRecord", "run_episode", "supported"]
 
 
 @dataclass(frozen=True)
@@ -51,8 +51,9 @@ class StopRules:
         stable_m: the estimate moves less than this over ``stable_views`` views, each with an
             accepted measurement ("stable"; a gated-out view does not count as agreement).
         approach_distance_m: the camera is this close to the estimate ("approached").
-        stall_m: the camera moved less than this over ``stable_views`` views: the planner
-            finds no better view it can reach, and more views from one place would only fuse
+        stall_m: the camera moved less than this over ``stable_views`` views, each planned
+            and reached (a fallback or an IK failure does not count): the planner finds no
+            better view it can reach, and more views from one place would only fuse
             the same errors again (a per-fruit bias such as the unknown radius is not averaged
             out by repeating it). "approach_blocked" in approach mode (it cannot come closer),
             else "stalled".
@@ -70,6 +71,7 @@ class StopRules:
         stalled = (
             self.stall_m is not None
             and len(views) > n
+            and all(_planned_move(v) for v in views[-n:])
             and max(
                 np.linalg.norm(views[-i].p_world_camera - views[-n - 1].p_world_camera)
                 for i in range(1, n + 1)
@@ -89,6 +91,12 @@ class StopRules:
             if max(moves) <= self.stable_m:
                 return "stable"
         return "stalled" if stalled else None
+
+
+def _planned_move(view: ViewRecord) -> bool:
+    """The planner chose this view and the arm went there: no planner fallback, no IK failure
+    (a camera held by a failure has not run out of better views)."""
+    return view.plan_status != "fallback" and not any(e.startswith("ik_") for e in view.events)
 
 
 @dataclass(frozen=True)
@@ -125,7 +133,8 @@ def run_episode(
 ) -> EpisodeResult:
     """Observe from the start pose, then up to ``steps`` times: plan, move, predict, observe,
     update; ``stop`` may end it early. Outcome: the rule that ended it, "max_views", or
-    "never_detected" when no view measured the fruit.
+    "never_detected" when no view measured the fruit; "unreliable" instead when the final
+    estimate is not supported by the measurements (:func:`supported`).
 
     A planner that fails (raises a :class:`BveError`, a numerical error, or returns a
     non-finite point) does not end the episode: the camera holds where it is, looking at the
@@ -157,7 +166,7 @@ def run_episode(
                     n = filter_config.reset_after_rejections
                     rejected.append(obs)
                     del rejected[: -2 * n]  # the last 2n rejected measurements
-                    reset = _reopen(belief.mean, prior.cov, rejected, n, gate)
+                    reset = _reopen(prior, rejected, n, gate)
                     if reset is not None:  # the belief had locked onto something wrong
                         events.append("belief_reset")
                         result = dataclasses.replace(result, belief=reset, accepted=True)
@@ -192,9 +201,25 @@ def run_episode(
         outcome = stop.outcome(views) if stop is not None else None
         if outcome is not None:
             break
-    if outcome is None:
-        outcome = "max_views" if any(v.measured for v in views) else "never_detected"
+    if not any(v.measured for v in views):
+        outcome = "never_detected"  # whatever stopped it: nothing was ever measured
+    elif outcome is None:
+        outcome = "max_views"
+    if outcome != "never_detected" and not supported(views, filter_config.reset_after_rejections):
+        outcome = "unreliable"
     return EpisodeResult(prior, tuple(views), time.perf_counter() - t0, outcome)
+
+
+def supported(views: Sequence[ViewRecord], window: int) -> bool:
+    """Whether the final estimate rests on the measurements: at least two accepted since the
+    last belief reset, and at most half of the last ``2 * window`` measurements gated out
+    (when most recent measurements disagree with the estimate, the estimate is not what the
+    camera sees). An episode that fails this ends ``unreliable`` whatever its stop rule said."""
+    start = max((k for k, v in enumerate(views) if "belief_reset" in v.events), default=0)
+    if sum(v.accepted for v in views[start:]) < 2:
+        return False
+    recent = [v for v in views if v.measured][-2 * window :]
+    return 2 * sum(not v.accepted for v in recent) <= len(recent)
 
 
 def _plan_or_hold(
@@ -216,19 +241,22 @@ def _plan_or_hold(
     return hold, [f"planner_failed: {reason}"]
 
 
-def _reopen(
-    mean: np.ndarray, cov: np.ndarray, rejected: list[Observation], n: int, gate: float | None
-) -> Belief | None:
-    """A belief reopened at ``mean`` with the prior's covariance ``cov`` and ``n`` of the
-    ``rejected`` measurements fused (the newest such set), if some ``n`` of them, the newest
-    among them, pass the gate one after another: they agree with each other, so the old
-    belief was wrong. None when no such set exists (outliers and false detections do not
-    agree with each other)."""
+def _reopen(prior: Belief, rejected: list[Observation], n: int, gate: float | None) -> Belief | None:
+    """The episode's prior with ``n`` of the ``rejected`` measurements fused (the newest such
+    set), if some ``n`` of them, the newest among them, pass the gate one after another,
+    starting from the prior: they agree with each other, and each is geometrically
+    plausible (consistent with where the prior says the fruit can be, so a blob of several
+    fruit, whose apparent size puts it far too close, is never adopted). The old belief was
+    then wrong. None when no such set exists (outliers and false detections do not agree
+    with each other or with the prior)."""
     if len(rejected) < n:
         return None
+    plausible = [obs for obs in rejected if update(prior, obs.z, obs.model, gate).accepted]
+    if len(plausible) < n or plausible[-1] is not rejected[-1]:
+        return None
     newest = rejected[-1]
-    for others in itertools.combinations(reversed(rejected[:-1]), n - 1):
-        belief = Belief(mean, cov)
+    for others in itertools.combinations(reversed(plausible[:-1]), n - 1):
+        belief = prior
         for obs in (*reversed(others), newest):
             result = update(belief, obs.z, obs.model, gate)
             if not result.accepted:

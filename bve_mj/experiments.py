@@ -159,12 +159,13 @@ def synthetic_episode(
     not at the protocol's random start (which the arm cannot reach); fruit, initial
     estimate and noise are the same draws as every other experiment's run ``run``.
     """
+    settings = settings.for_world("synthetic")
     scenario_ss, noise_ss, planner_ss, fault_ss = np.random.SeedSequence(seed, spawn_key=(run,)).spawn(4)
     scenario = sample_scenario(settings.protocol, np.random.default_rng(scenario_ss))
     planner_rng = np.random.default_rng(planner_ss)
     planner: Planner
     if experiment.needs_arm:
-        kin = arm_kinematics(settings.robot.name, settings.robot.joint_limits)
+        kin = arm_kinematics(settings.robot.name, settings.robot.limit_set)
         p_start, _ = kin.camera_pose(kin.home)
         scenario = dataclasses.replace(scenario, p_world_camera_start=p_start)
         planner = make_arm_planner(

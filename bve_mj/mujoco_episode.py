@@ -43,12 +43,14 @@ class Recorder(Protocol):
 def episode_settings(settings: Settings) -> Settings:
     """``settings`` with the episode's constraint and planner adaptations applied.
 
-    The distance band and step limit take the episode's values (adapted to the arm's
+    World-dependent defaults are resolved for MuJoCo (``measurement.kind = "auto"`` is the
+    camera measurement). The distance band and step limit take the episode's values (adapted to the arm's
     reach); Σc is taken at the band distance; approach mode turns the eq. 13 term on
     (a = 1, b = 4 unless set), drops the band and moves the plant wall to
     ``approach_wall_distance_m`` in front of the fruit. The EKF gates measurements at
     ``episode.gate_probability`` unless ``filter.gate_probability`` is set.
     """
+    settings = settings.for_world("mujoco")
     ep = settings.episode
     planner: dict[str, object] = {}
     constraints: dict[str, object] = {
@@ -181,7 +183,7 @@ def run_mujoco_episode(
     s = episode_settings(settings)
     ep = s.episode
     scene_ss, prior_ss, sensor_ss, planner_ss, fault_ss = np.random.SeedSequence(seed).spawn(5)
-    kin = arm_kinematics(s.robot.name, s.robot.joint_limits)
+    kin = arm_kinematics(s.robot.name, s.robot.limit_set)
     spec, info = build_scene(
         kin, s.scene, np.random.default_rng(scene_ss), s.camera,
         target=target, distractors=distractors, leaves=leaves,

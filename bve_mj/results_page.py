@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import datetime
 import itertools
+import json
 import os
 import platform
 import shutil
@@ -20,12 +21,13 @@ from typing import Any
 
 import numpy as np
 
-from bve_mj.atomic import write_text_atomic
+from bve_mj.atomic import write_json_atomic, write_text_atomic
 from bve_mj.campaign import CampaignResult, CampaignSpec, Cell, run_campaign
 from bve_mj.campaign_report import cell_summary, plot_campaign, write_campaign_outputs
 from bve_mj.config import Settings
 from bve_mj.errors import ConfigError
 from bve_mj.experiments import EXPERIMENTS, PAPER_RESULTS
+from bve_mj.scenarios import format_suite, load_suite, run_suite, suite_json
 
 __all__ = ["PageOptions", "build_results_page"]
 
@@ -41,9 +43,10 @@ class PageOptions:
     recover_grid: tuple[float, ...] = tuple(round(0.01 * i, 2) for i in range(51))
     experiments: tuple[str, ...] = tuple(EXPERIMENTS)
     seed: int = 0
+    scenario_seeds: int = 20
 
     def __post_init__(self) -> None:
-        for name in ("runs", "mujoco_runs", "recover_runs", "seed"):
+        for name in ("runs", "mujoco_runs", "recover_runs", "seed", "scenario_seeds"):
             v = getattr(self, name)
             lo = 0 if name == "seed" else 1
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
@@ -58,7 +61,8 @@ class PageOptions:
         grid = f"{g[0]:g}:{g[-1]:g}:{step:g}" if uniform else ",".join(f"{e:g}" for e in g)
         return (
             f"bve-mj results --runs {self.runs} --mujoco-runs {self.mujoco_runs} "
-            f"--recover-runs {self.recover_runs} --recover-grid {grid} --seed {self.seed}"
+            f"--recover-runs {self.recover_runs} --recover-grid {grid} --seed {self.seed} "
+            f"--scenario-seeds {self.scenario_seeds}"
             + (
                 ""
                 if self.experiments == tuple(EXPERIMENTS)
@@ -230,6 +234,39 @@ def _version() -> str:
     return f"{v}, commit {commit}{' +modified' if modified else ''}"
 
 
+def _scenario_suite(
+    work: Path,
+    o: PageOptions,
+    measurement: str,
+    workers: int | None,
+    log: Callable[[str], None],
+    progress: Callable[[int, int], None] | None,
+) -> dict[str, Any]:
+    """The suite's ``--json`` document for ``measurement``, reused from ``work`` when it was
+    made with the same seeds and scenarios (like the campaigns, a rerun after a code change
+    needs a fresh ``--work``)."""
+    suite = load_suite()
+    path = work / f"scenarios_{measurement}.json"
+    if path.exists():
+        doc: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+        if (doc.get("seeds"), doc.get("seed"), sorted(doc.get("scenarios", {}))) == (
+            o.scenario_seeds,
+            o.seed,
+            sorted(sc.name for sc in suite),
+        ):
+            log(f"scenarios {measurement}: reused {path}")
+            return doc
+    log(f"scenarios {measurement}: {len(suite)} x {o.scenario_seeds} episodes -> {path}")
+    result = run_suite(
+        suite, seeds=o.scenario_seeds, seed=o.seed, measurement=measurement,  # type: ignore[arg-type]
+        workers=workers, progress=progress,
+    )  # fmt: skip
+    doc = suite_json(result)
+    work.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(path, doc)
+    return doc
+
+
 def build_results_page(
     settings: Settings,
     out_md: Path,
@@ -258,6 +295,10 @@ def build_results_page(
         write_campaign_outputs(results[name], plots=True)
         if results[name].crashed:
             log(f"  {len(results[name].crashed)} runs crashed (left out): {results[name].crashed[0]}")
+    suites = {
+        m: _scenario_suite(work, options, m, workers, log, progress(f"scenarios {m}") if progress else None)
+        for m in ("camera", "range")
+    }
     written: list[Path] = []
 
     def copy(name: str, png: str, as_name: str) -> str:
@@ -362,6 +403,17 @@ def build_results_page(
             f"Median and IQR of the error after each view, {label} world, {focus}, every planner "
             f"and measurement: from `{cmds[label]}`.",
         )
+    md += [
+        "## The greenhouse scenario suite",
+        "",
+        f"`bve-mj scenarios --seeds {options.scenario_seeds} --seed {options.seed} --measurement M`: "
+        "every named scene of `examples/scenarios/suite/` (trusses of touching fruit, fruit types, "
+        "ripeness, occlusion, light, sensors), one seeded closed-loop episode per seed. "
+        "**silent** counts confident wrong answers: it must be 0.",
+        "",
+    ]
+    for m, doc in suites.items():
+        md += [f"### Measurement: {m}", "", *format_suite(doc["scenarios"], markdown=True), ""]
     md += ["## 4. Sample paths", ""]
     for label in ("synthetic", "mujoco"):
         md += figure(

@@ -1,7 +1,10 @@
 """An approach episode (paper eq. 13: localise while moving in) recorded as an mp4, plus a
 2x2 still of four moments of it (start, two midway, end) for the README.
 
-    python examples/approach_video.py [out.mp4] [seed]
+    python examples/approach_video.py [OUT_DIR] [SEED]
+
+Writes OUT_DIR/approach.mp4 and OUT_DIR/approach_frames.png (default OUT_DIR: out/, which git
+ignores; the README's copies in assets/ were made from these).
 """
 
 from __future__ import annotations
@@ -18,10 +21,10 @@ from bve_mj.mujoco_episode import run_mujoco_episode
 from bve_mj.video import EpisodeRecorder
 
 
-def main(out: str = "approach.mp4", seed: int = 1) -> None:
-    settings = with_overrides(
-        Settings(), measurement={"kind": "camera"}, episode={"approach": True, "views": 20}
-    )
+def main(out_dir: str = "out", seed: int = 1) -> None:
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    out = Path(out_dir) / "approach.mp4"
+    settings = with_overrides(Settings(), episode={"approach": True, "views": 20})
     recorder = EpisodeRecorder(out)
     episode = run_mujoco_episode(settings, seed, recorder=recorder)
     frames = recorder.close()
@@ -31,10 +34,10 @@ def main(out: str = "approach.mp4", seed: int = 1) -> None:
     all_frames = [f for f in reader]
     picks = [all_frames[int(i)][::2, ::2] for i in np.linspace(0, len(all_frames) - 1, 4)]
     still = np.vstack([np.hstack(picks[:2]), np.hstack(picks[2:])])
-    png = Path(out).with_name(Path(out).stem + "_frames.png")
+    png = out.with_name(out.stem + "_frames.png")
     imageio.imwrite(png, still)
     print(f"wrote {png}")
 
 
 if __name__ == "__main__":
-    main(*(sys.argv[1:2] or ["approach.mp4"]), *(int(a) for a in sys.argv[2:3]))
+    main(*(sys.argv[1:2] or ["out"]), *(int(a) for a in sys.argv[2:3]))

@@ -1,10 +1,10 @@
 """A small campaign from Python: BVE against the circle baseline in both worlds, resumable.
 
-python examples/campaign.py [OUT_DIR]   (default: campaign_example/; run it twice: the second
-call finds every run done and only rewrites the outputs)
+python examples/campaign.py [OUT_DIR]   (default: out/campaign_example/, which git ignores; run
+it twice: the second call finds every run done and only rewrites the outputs)
 
 The same from the shell:
-bve-mj campaign --out campaign_example --experiments E1,E5 --worlds synthetic,mujoco \
+bve-mj campaign --out out/campaign_example --experiments E1,E5 --worlds synthetic,mujoco \
     --planners bve,circle --measurements camera --runs 5
 """
 
@@ -17,7 +17,7 @@ from bve_mj.campaign import CampaignSpec, run_campaign
 from bve_mj.campaign_report import format_cells, write_campaign_outputs
 
 
-def main(out: str = "campaign_example") -> None:
+def main(out: str = "out/campaign_example") -> None:
     spec = CampaignSpec(
         experiments=("E1", "E5"),
         worlds=("synthetic", "mujoco"),

@@ -10,13 +10,11 @@ import sys
 import numpy as np
 
 from bve_mj import Settings
-from bve_mj.experiments import with_overrides
 from bve_mj.mujoco_episode import run_mujoco_episode
 
 
 def main(seed: int = 0) -> None:
-    settings = with_overrides(Settings(), measurement={"kind": "camera"})
-    episode = run_mujoco_episode(settings, seed)
+    episode = run_mujoco_episode(Settings(), seed)  # the closed loop's defaults, as bve-mj episode
     for v in episode.result.views:
         err = 1e3 * np.linalg.norm(v.belief.mean - episode.truth)
         print(f"view {v.iteration:2d}: detected={v.measured!s:5}  error {err:7.2f} mm")

@@ -1,9 +1,10 @@
 """Render the greenhouse: the eye-in-hand view with the detection drawn on it, and an
 outside view of the arm before the plant row.
 
-    python examples/render_scene.py [seed] [out_dir]
+    python examples/render_scene.py [SEED] [OUT_DIR]
 
-Writes out_dir/greenhouse.png (default: assets/): outside view | eye-in-hand view.
+Writes OUT_DIR/greenhouse.png (default OUT_DIR: out/, which git ignores): outside view |
+eye-in-hand view.
 """
 
 from __future__ import annotations
@@ -24,9 +25,9 @@ from bve_mj.sim.scene import build_scene
 from bve_mj.video import draw_detection
 
 
-def main(seed: int = 4, out_dir: str = "assets") -> None:
-    s = Settings()
-    kin = ArmKinematics(get_robot(s.robot.name), s.robot.joint_limits)
+def main(seed: int = 4, out_dir: str = "out") -> None:
+    s = Settings().for_world("mujoco")  # the closed loop's settings (fruit prior of the scene's type)
+    kin = ArmKinematics(get_robot(s.robot.name), s.robot.limit_set)
     spec, info = build_scene(kin, s.scene, np.random.default_rng(seed), s.camera)
     model = spec.compile()
     data = mujoco.MjData(model)
@@ -47,11 +48,21 @@ def main(seed: int = 4, out_dir: str = "assets") -> None:
         caption += f"; assumed r {1e3 * s.fruit.radius_m:.0f} mm, true {1e3 * info.target.radius_m:.1f} mm"
     shown = cv2.cvtColor(draw_detection(eye, det, caption), cv2.COLOR_RGB2BGR)
     out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
     outside = cv2.cvtColor(
-        renderer.render_free(data, np.array([0.3, 0.0, 0.15]), 1.9, 25, -20), cv2.COLOR_RGB2BGR
+        renderer.render_free(data, np.array([0.25, 0.0, 0.1]), 1.15, 30, -18), cv2.COLOR_RGB2BGR
     )
     cv2.imwrite(str(out / "greenhouse.png"), np.hstack([outside, shown]))
-    print(f"wrote {out / 'greenhouse.png'} (outside view | eye-in-hand view); detection: {det}")
+    print(f"wrote {out / 'greenhouse.png'} (outside view | eye-in-hand view)")
+    if isinstance(det, Detection):
+        print(
+            f"detection: centre ({det.centre_px[0]:.1f}, {det.centre_px[1]:.1f}) px, radius "
+            f"{det.radius_px:.1f} px, measured range {det.range_m:.3f} m "
+            f"(true {np.linalg.norm(k - p):.3f} m), "
+            f"{100 * det.trimmed_fraction:.0f}% of the outline trimmed"
+        )
+    else:
+        print(f"no detection: {det.reason}")
 
 
 if __name__ == "__main__":

@@ -1,13 +1,15 @@
 """Sample camera paths of the BVE in the synthetic world, like the paper's Fig. 4.
 
-    python examples/sample_paths.py [out.png]
+    python examples/sample_paths.py [OUT_DIR]
 
-Writes assets/sample_paths.png by default (needs the plots extra: pip install -e ".[plots]").
+Writes OUT_DIR/sample_paths.png (default OUT_DIR: out/, which git ignores; needs the plots
+extra: pip install -e ".[plots]").
 """
 
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -16,7 +18,9 @@ from bve_mj.experiments import sample_scenario, with_overrides
 from bve_mj.plots import plot_sample_paths
 
 
-def main(out: str = "assets/sample_paths.png") -> None:
+def main(out_dir: str = "out") -> None:
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    out = Path(out_dir) / "sample_paths.png"
     panels = []
     for name, measurement, model, run in (
         ("E2", "range", "paper", 3),

@@ -257,9 +257,10 @@ def test_recoverability_cli_and_mujoco_rows_reproduce_as_episodes(
 def test_results_page_numbers_come_from_its_campaigns(tmp_path: Path) -> None:
     docs = tmp_path / "docs"
     docs.mkdir()
-    code = main(["results", "--out", str(docs / "results.md"), "--work", str(tmp_path / "work"),
-                 "--runs", "2", "--mujoco-runs", "1", "--recover-runs", "1", "--recover-grid", "0,0.3",
-                 "--experiments", "E1", "--workers", "1", "--quiet"])  # fmt: skip
+    argv = ["results", "--out", str(docs / "results.md"), "--work", str(tmp_path / "work"), "--runs", "2",
+            "--mujoco-runs", "1", "--recover-runs", "1", "--recover-grid", "0,0.3", "--experiments", "E1",
+            "--workers", "1", "--scenario-seeds", "1", "--quiet"]  # fmt: skip
+    code = main(argv)
     assert code == 0
     page = (docs / "results.md").read_text()
     for heading in (
@@ -267,8 +268,10 @@ def test_results_page_numbers_come_from_its_campaigns(tmp_path: Path) -> None:
         "Recoverability",
         "against the baselines",
         "Sample paths",
+        "scenario suite",
     ):
         assert heading in page
+    assert "| truss_chain |" in page and "### Measurement: range" in page
     for line in page.splitlines():
         if line.startswith("!["):
             target = line[line.index("(") + 1 : line.index(")")]
@@ -278,7 +281,5 @@ def test_results_page_numbers_come_from_its_campaigns(tmp_path: Path) -> None:
     row = next(line for line in page.splitlines() if line.startswith("| E1 | dispersion"))
     assert f"| {e1['euclid_mean_mm']:.1f} |" in row and "| 37.1 | 15.5 |" in row
     # a second call resumes everything: nothing is recomputed
-    assert main(["results", "--out", str(docs / "results.md"), "--work", str(tmp_path / "work"),
-                 "--runs", "2", "--mujoco-runs", "1", "--recover-runs", "1", "--recover-grid", "0,0.3",
-                 "--experiments", "E1", "--workers", "1", "--quiet"]) == 0  # fmt: skip
+    assert main(argv) == 0
     assert "0 computed in this call" in (docs / "results.md").read_text()

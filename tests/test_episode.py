@@ -19,7 +19,7 @@ CAMERA = with_overrides(Settings(), measurement={"kind": "camera"})
 
 
 def _check_joint_limits(ep):
-    kin = arm_kinematics(ep.settings.robot.name, ep.settings.robot.joint_limits)
+    kin = arm_kinematics(ep.settings.robot.name, ep.settings.robot.limit_set)
     for v in ep.to_json()["views"]:
         q = np.array(v["q_rad"])
         assert np.all(q >= kin.limits.lower - 1e-3) and np.all(q <= kin.limits.upper + 1e-3)
@@ -108,3 +108,51 @@ def test_episode_cli_json_and_bad_input(tmp_path, capsys):
         assert main(argv) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and field in err
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
+def test_approach_arrives_or_says_why_not(seed):
+    """The default approach episode: within 0.1 m of the fruit, or an outcome naming why not."""
+    s = with_overrides(Settings(), episode={"approach": True})
+    ep = run_mujoco_episode(s, seed)
+    last = ep.result.views[-1]
+    gap = float(np.linalg.norm(last.p_world_camera - ep.result.final.mean))
+    assert ep.result.outcome in ("approached", "approach_blocked")
+    assert (gap <= s.episode.approach_distance_m) == (ep.result.outcome == "approached")
+    assert ep.final_error_mm < 2.0
+    _check_joint_limits(ep)
+
+
+def test_a_camera_that_stops_moving_ends_the_episode():
+    """Repeating one view fuses the same errors again: the loop stops ("stalled") instead of
+    taking all its views, and "approach_blocked" in approach mode."""
+    from bve_mj.episode import StopRules, ViewRecord
+    from bve_mj.estimation.belief import Belief
+
+    def view(i, p):
+        b = Belief(np.zeros(3), np.eye(3) * 1e-2)  # far from converged
+        return ViewRecord(i, np.asarray(p, float), None, True, 0.0, True, False, 1.0, b)
+
+    still = [view(i, [0.2, 0.0, 1e-3 * i]) for i in range(5)]
+    moving = [view(i, [0.2, 0.0, 0.01 * i]) for i in range(5)]
+    rules = StopRules(sigma_m=1e-3, stable_m=1e-4, stall_m=0.005)
+    assert rules.outcome(still) == "stalled" and rules.outcome(moving) is None
+    assert rules.outcome(still[:3]) is None  # needs stable_views views after the first
+    approach = StopRules(approach_distance_m=0.1, stall_m=0.005)
+    assert approach.outcome(still) == "approach_blocked" and approach.outcome(moving) is None
+
+
+def test_many_views_stop_when_the_view_stops_changing():
+    """--views 10000 --approach used to take 10,001 views (283 s) and end with NEES 3727."""
+    s = with_overrides(Settings(), episode={"approach": True, "views": 10000})
+    ep = run_mujoco_episode(s, 0)
+    assert len(ep.result.views) < 40
+    d = ep.result.final.mean - ep.truth
+    assert d @ np.linalg.solve(ep.result.final.cov, d) < 16.3  # inside the 99.9% ellipsoid
+
+
+def test_ready_pose_keeps_off_the_joint_limits():
+    for seed in range(5):
+        ep = run_mujoco_episode(Settings(), seed, leaves=False)
+        kin = arm_kinematics(ep.settings.robot.name, ep.settings.robot.limit_set)
+        assert kin.limit_margin(ep.q_start) >= 0.1

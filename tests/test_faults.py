@@ -177,9 +177,13 @@ def test_out_of_reach_and_never_visible_are_outcomes_with_exit_3(
 def test_fault_injection_suite_200_mujoco_episodes(tmp_path: Path) -> None:
     """200 short seeded MuJoCo episodes with the faults of examples/scenarios/faults.toml.
 
-    The few large errors left (max ~68 mm, under the prior's worst case) are the unknown fruit
-    radius: a fruit 16-29% smaller than the prior's biases every range alike, and holds after
-    injected failures repeat one viewing direction."""
+    In the sphere scene this gave median 0.54, p95 1.61, max 67.65 mm (a wrong-radius range
+    bias held after failures repeated one view). In the realistic scene (spheroid fruit, shape
+    index 0.8-0.95, touching trusses) with the arc-grouping detector: median 1.83, p95 6.23,
+    max 11.21 mm; the median and p95 are the unknown size and shape of each fruit, a per-fruit
+    bias the filter still treats as noise (the size issue puts the radius in the state). An
+    episode may end ``stalled`` (camera stopped moving) or ``unreliable`` (estimate not
+    supported by the measurements): honest outcomes, never a crash."""
     settings = load_settings(REPO / "examples" / "scenarios" / "faults.toml")
     assert settings.faults.drop_p == 0.3 and settings.sensor.encoder_noise_rad > 0
     spec = CampaignSpec(experiments=("E1", "E5"), worlds=("mujoco",), measurements=("camera",), runs=100)
@@ -188,15 +192,15 @@ def test_fault_injection_suite_200_mujoco_episodes(tmp_path: Path) -> None:
     assert len(rows) == 200
     assert not result.crashed, result.crashed[:3]
     outcomes = {r["outcome"] for r in rows}
-    assert outcomes <= {"converged", "stable", "max_views", "never_detected"}, outcomes
+    assert outcomes <= {"converged", "stable", "max_views", "never_detected", "stalled", "unreliable"}
     assert all(r["belief_finite"] for r in rows)
     assert max(r["joint_limit_violation_rad"] for r in rows) <= 1e-3
-    radius = max(settings.scene.fruit_radius_m)
+    radius = settings.scene.radius_range_m[1]
     assert min(r["min_camera_fruit_distance_m"] for r in rows) > radius
     errors = np.array([r["error_mm"] for r in rows])
     initial_bound_mm = 1e3 * settings.episode.initial_error_m * np.sqrt(3.0)
     assert errors.max() <= initial_bound_mm  # bounded: never worse than the prior's worst case
-    assert np.median(errors) < 2.0 and np.percentile(errors, 95) < 5.0
+    assert np.median(errors) < 3.0 and np.percentile(errors, 95) < 10.0 and errors.max() < 25.0
     counts: dict[str, int] = {}
     for r in rows:
         for k, n in r["events"].items():

@@ -52,3 +52,21 @@ def test_e5_runs_report_reachability():
     np.testing.assert_allclose(rec.plan_ms.shape, (8,))
     assert rec.ever_feasible or rec.restoring_steps == 8
     assert np.linalg.norm(kin.camera_pose(kin.home)[0]) < 1.0
+
+
+def test_joint_limit_barrier_gradient_matches_finite_differences():
+    from bve_mj.robot import arm_kinematics
+    from bve_mj.robot.planner import _LimitMargin
+
+    kin = arm_kinematics("manipulator_h", "emanual")
+    barrier = _LimitMargin(kin, 1.0)
+    rng = np.random.default_rng(3)
+    lo, hi = kin.limits.lower, kin.limits.upper
+    for _ in range(20):
+        q = lo + (hi - lo) * rng.choice([0.02, 0.05, 0.5, 0.93, 0.97], kin.nq)
+        value, grad = barrier(q)
+        fd = np.array([(barrier(q + e)[0] - barrier(q - e)[0]) / 2e-7 for e in np.eye(kin.nq) * 1e-7])
+        np.testing.assert_allclose(grad, fd, rtol=1e-5, atol=1e-6)
+        assert value >= 0.0
+    mid = 0.5 * (lo + hi)
+    assert barrier(mid) == (0.0, pytest.approx(np.zeros(kin.nq)))

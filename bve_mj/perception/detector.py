@@ -1,5 +1,6 @@
-"""The tomato detector: colour segmentation → connected components → the target blob → a
-cone fit to its visible silhouette → a 3-D measurement of the fruit centre with covariance.
+"""The tomato detector: colour segmentation → the ripe blobs' outlines → the fruit in them
+→ a cone fit to the target's own silhouette → a 3-D measurement of its centre with
+covariance.
 
 Why a cone and not an image circle: the rays that graze a sphere form a circular cone
 around the direction to its centre, with half-angle α = asin(r/ρ). Every boundary ray b
@@ -8,6 +9,20 @@ It is exact off-axis, where the image outline is an ellipse, and it uses only th
 boundary, so a leaf over part of the fruit removes points instead of biasing the answer:
 boundary points that lie well inside the fitted cone (occluder edges) are trimmed and the
 fit repeated. Range is exact: ρ = r / sin α, r the radius the estimator assumes.
+
+Touching fruit: the tomatoes of a truss touch, so a ripe blob is usually several fruit, and
+a fruit of uneven colour (or with a stem across it) several blobs. The outlines of the blob
+the prediction falls on and of the blobs around it are cut into arcs at their corners and
+grouped into fruit, one circle each (:mod:`bve_mj.perception.instances`); the fruit whose
+circle is nearest the predicted projection is the target, and only its own outer arcs are
+fitted: where it meets a neighbour there is no outline (red on red) and the blended points
+at the junction are left out, and the arcs of its fragments are fitted together (those on
+their common convex hull). The fit is then checked: enough of the outline seen, a circle
+that fits it, none of its points well outside, a centre the arcs pin down, a radius no
+speck has, and (when the caller knows the predicted range) an apparent size the prior
+allows. A target that fails says why, in a :class:`NoDetection`: a merged blob is never
+measured as one fruit. What passes has a covariance that includes the fit's own
+uncertainty.
 
 Frames: the paper's camera frame (x optical axis, y left, z up); pixels u right, v down.
 """
@@ -22,8 +37,9 @@ import numpy as np
 
 from bve_mj.config import CameraConfig, DetectorConfig, FruitPrior, MeasurementConfig
 from bve_mj.geometry import pixel_rays, project_point
+from bve_mj.perception.instances import Arc, Circle, FruitOutline, group_arcs, hull_points, outline_arcs
 
-__all__ = ["Detection", "Intrinsics", "NoDetection", "detect", "red_mask"]
+__all__ = ["Detection", "Intrinsics", "NoDetection", "detect", "red_mask", "ripe_mask"]
 
 
 @dataclass(frozen=True)
@@ -85,16 +101,17 @@ class NoDetection:
     reason: str
 
 
-def red_mask(image_rgb: np.ndarray, cfg: DetectorConfig) -> np.ndarray:
-    """Pixels of ripe-red hue, saturated and lit enough: uint8 mask 0/255."""
+def ripe_mask(image_rgb: np.ndarray, cfg: DetectorConfig) -> np.ndarray:
+    """Pixels of ripe hue (``cfg.ripe_hue_max``: red, or up to the ripeness class the
+    settings accept; red wraps around hue 180), saturated and lit enough: uint8 mask 0/255."""
     hsv = cv2.cvtColor(image_rgb, cv2.COLOR_RGB2HSV)
-    h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
-    red = (
-        ((h <= cfg.red_hue_max) | (h >= cfg.red_hue_min_wrap))
-        & (s >= cfg.min_saturation)
-        & (v >= cfg.min_value)
-    )
-    return red.astype(np.uint8) * 255
+    low = (cfg.min_saturation, cfg.min_value)
+    ripe = cv2.inRange(hsv, (0, *low), (cfg.ripe_hue_max, 255, 255))
+    return cv2.bitwise_or(ripe, cv2.inRange(hsv, (cfg.red_hue_min_wrap, *low), (255, 255, 255)))
+
+
+red_mask = ripe_mask
+"""The former name of :func:`ripe_mask`."""
 
 
 def _fit_cone(rays: np.ndarray) -> tuple[np.ndarray, float]:
@@ -123,6 +140,162 @@ def _check_image(image: object) -> str | None:
     return None
 
 
+@dataclass(frozen=True)
+class _Fit:
+    axis: np.ndarray  # cone axis, unit (3,)
+    alpha: float  # half-angle [rad]
+    centre: np.ndarray  # image of the axis [px]
+    keep: np.ndarray  # points kept, (N,) bool
+    resid_px: np.ndarray  # inside-positive residuals of all points [px], (N,)
+    rays: np.ndarray  # the points' rays, (N, 3)
+
+
+def _fit_silhouette(
+    uv: np.ndarray, centre: np.ndarray, intrinsics: Intrinsics, cfg: DetectorConfig
+) -> _Fit | str:
+    """The cone through silhouette points ``uv`` (N, 2) [px, continuous], trimming points well
+    inside it (occluder edges; for a fruit that is not a sphere, the narrower parts of its
+    outline too: the fit goes through its widest parts, the equator of a flattened fruit)
+    with their contour neighbours; a reason string on failure."""
+    keep = np.ones(len(uv), dtype=bool)
+    threshold = cfg.outlier_px
+    f = intrinsics.focal_px
+    for _ in range(8):
+        # the silhouette runs half a pixel outside the centres of the boundary pixels
+        d = uv - centre
+        edge = uv + 0.5 * d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+        rays = intrinsics.rays(edge)
+        axis, cos_a = _fit_cone(rays[keep])
+        if not (0.0 < cos_a < 1.0) or axis[0] <= 0.0:
+            return "silhouette fit failed (degenerate boundary)"
+        centre = intrinsics.project(axis)
+        # residual in pixels: positive = inside the cone (occluder edges, calyx); only
+        # inside points can be occlusion, so only they are trimmed, against a threshold
+        # that tightens to 3 robust σ of the points kept (never below 0.5 px)
+        alpha = math.acos(cos_a)
+        ang = np.arccos(np.clip(rays @ axis, -1.0, 1.0))
+        resid_px = (alpha - ang) * f
+        kept = resid_px[keep]
+        sigma = 1.4826 * float(np.median(np.abs(kept - np.median(kept))))
+        threshold = min(threshold, max(0.5, 3.0 * sigma)) if keep.sum() < len(keep) else threshold
+        # points far outside the cone cannot be its silhouette either: a neighbour's outline
+        # beyond a junction that no corner marked
+        far_out = resid_px < -max(2.0 * cfg.outlier_px, 4.0 * sigma)
+        new_keep = _trim_corners((resid_px < threshold) & ~far_out, margin=3)
+        if new_keep.sum() < cfg.min_boundary_points or np.array_equal(new_keep, keep):
+            break
+        keep = new_keep
+    return _Fit(axis, alpha, centre, keep, resid_px, rays)
+
+
+def _arc_deg(uv: np.ndarray, centre: np.ndarray) -> float:
+    """Degrees of a circle's outline that points (N, 2) cover, in 10° sectors."""
+    ang = np.degrees(np.arctan2(uv[:, 1] - centre[1], uv[:, 0] - centre[0]))
+    return 10.0 * len(np.unique(np.floor((ang + 180.0) / 10.0).astype(int) % 36))
+
+
+def _fit_sigmas(fit: _Fit, uv: np.ndarray, f: float) -> tuple[float, float]:
+    """The fit's own 1σ of the cone axis (lateral, the worse direction) and of α [rad].
+
+    Least squares in w: the residual of a ray is b·w - 1 ≈ tan α · (its angular residual).
+    The point error is the fit's rms (at least half a pixel), and boundary errors are
+    correlated along the outline (shading, blending, a ragged edge), so the points count as
+    one per 10° sector they cover: a short arc pins the centre and the radius down poorly,
+    and says so."""
+    keep = fit.keep
+    rays = fit.rays[keep]
+    if len(rays) < 4:
+        return math.inf, math.inf
+    resid = fit.resid_px[keep] / f
+    var = math.tan(fit.alpha) ** 2 * max(float(resid @ resid) / len(resid), (0.5 / f) ** 2)
+    sectors = _arc_deg(uv[keep], fit.centre) / 10.0
+    try:
+        cov_w = var * len(rays) / max(sectors, 1.0) * np.linalg.inv(rays.T @ rays)
+    except np.linalg.LinAlgError:
+        return math.inf, math.inf
+    nw = 1.0 / math.cos(fit.alpha)  # |w|
+    g = fit.axis / (nw**2 * math.sin(fit.alpha))  # dα/dw = w / (|w|³ sin α)
+    sigma_alpha = math.sqrt(max(float(g @ cov_w @ g), 0.0))
+    P = (np.eye(3) - np.outer(fit.axis, fit.axis)) / nw  # da/dw
+    lateral = np.linalg.eigvalsh(P @ cov_w @ P.T)
+    return math.sqrt(max(float(lateral[-1]), 0.0)), sigma_alpha
+
+
+@dataclass(frozen=True)
+class _Blob:
+    """A connected ripe region: its outer outline (N, 2) in pixel indices, its area (pixels,
+    from the outline), its box (x, y, w, h) and centroid [px, continuous]."""
+
+    outline: np.ndarray
+    area: float
+    box: tuple[int, int, int, int]
+    centroid: np.ndarray
+
+
+def _blobs(mask: np.ndarray) -> list[_Blob]:
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    out = []
+    for c in contours:
+        m = cv2.moments(c)
+        pts = c[:, 0, :].astype(float)
+        centroid = np.array([m["m10"] / m["m00"], m["m01"] / m["m00"]]) if m["m00"] > 0 else pts.mean(axis=0)
+        # pixels = the polygon through the boundary pixels' centres + half a pixel around it
+        area = float(m["m00"]) + 0.5 * cv2.arcLength(c, True) + 1.0
+        x, y, w, h = cv2.boundingRect(c)
+        out.append(_Blob(pts, area, (x, y, w, h), centroid + 0.5))
+    return out
+
+
+def _inside(fruit: FruitOutline, circle: Circle) -> bool:
+    """Whether most of a fruit's outline points lie within another's circle."""
+    d = np.hypot(fruit.points[:, 0] - circle.centre[0], fruit.points[:, 1] - circle.centre[1])
+    return float(np.mean(d <= circle.radius + 2.0)) >= 0.8
+
+
+def _choose_blob(blobs: list[_Blob], predicted: np.ndarray | None) -> _Blob:
+    if predicted is None:
+        return max(blobs, key=lambda b: b.area)
+    at = (float(predicted[0] - 0.5), float(predicted[1] - 0.5))
+    for b in blobs:
+        x, y, w, h = b.box
+        inside_box = x <= at[0] <= x + w and y <= at[1] <= y + h
+        if inside_box and cv2.pointPolygonTest(b.outline.astype(np.float32), at, False) >= 0:
+            return b  # the blob the prediction falls on
+    return min(blobs, key=lambda b: float(np.linalg.norm(b.centroid - predicted)))
+
+
+def _nearby(blobs: list[_Blob], target: _Blob, limit: int = 12) -> list[_Blob]:
+    """The target blob and the blobs whose boxes overlap its box grown by half its size:
+    the other fragments a fruit of that blob could be in (largest first, at most ``limit``)."""
+    x, y, w, h = target.box
+    gx, gy = w // 2 + 2, h // 2 + 2
+    near = [
+        b
+        for b in blobs
+        if b is not target
+        and b.area >= 4
+        and b.box[0] < x + w + gx
+        and b.box[0] + b.box[2] > x - gx
+        and b.box[1] < y + h + gy
+        and b.box[1] + b.box[3] > y - gy
+    ]
+    near.sort(key=lambda b: -b.area)
+    return [target, *near[:limit]]
+
+
+def _area_inside(mask: np.ndarray, centre: np.ndarray, radius: float) -> int:
+    """Ripe pixels within the fitted circle (plus a pixel): the fruit's visible area."""
+    H, W = mask.shape
+    r = radius + 1.0
+    x0, x1 = max(math.floor(centre[0] - r), 0), min(math.ceil(centre[0] + r), W)
+    y0, y1 = max(math.floor(centre[1] - r), 0), min(math.ceil(centre[1] + r), H)
+    if x1 <= x0 or y1 <= y0:
+        return 0
+    yy, xx = np.ogrid[y0:y1, x0:x1]
+    inside = (xx + 0.5 - centre[0]) ** 2 + (yy + 0.5 - centre[1]) ** 2 <= r * r
+    return int(np.count_nonzero(inside & (mask[y0:y1, x0:x1] > 0)))
+
+
 def detect(
     image_rgb: np.ndarray,
     intrinsics: Intrinsics,
@@ -130,12 +303,19 @@ def detect(
     measurement: MeasurementConfig,
     config: DetectorConfig | None = None,
     predicted_px: np.ndarray | None = None,
+    *,
+    expected_radius_px: float | None = None,
 ) -> Detection | NoDetection:
     """Measure the target tomato in an RGB image.
 
     Args:
-        predicted_px: where the estimate projects; the red blob nearest to it is the target
-            (the largest red blob when None).
+        predicted_px: where the estimate projects; the fruit (of those found in the ripe
+            blob it falls on, else the blob nearest to it, and the fragments around) whose
+            circle centre is nearest to it is the target. None: the fruit with the longest
+            outline in the largest blob.
+        expected_radius_px: the apparent radius the estimate predicts (f·tan asin(r/ρ) at
+            the predicted range), if known: a fit off by more than ``size_tolerance_rel`` is
+            refused (a fragment, a merged blob, a neighbour).
     Returns:
         a :class:`Detection`, or a :class:`NoDetection` saying why (never raises on bad
         images: a wrong shape or dtype is a reason too).
@@ -146,71 +326,118 @@ def detect(
         return NoDetection(problem)
     if (intrinsics.height_px, intrinsics.width_px) != image_rgb.shape[:2]:
         return NoDetection(f"image {image_rgb.shape[1]}x{image_rgb.shape[0]} does not match the intrinsics")
-    mask = red_mask(image_rgb, cfg)
-    n, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    blobs = [i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= cfg.min_area_px]
+    mask = ripe_mask(image_rgb, cfg)
+    every = _blobs(mask)
+    blobs = [b for b in every if b.area >= cfg.min_area_px]
     if not blobs:
-        return NoDetection("no red blob" if n <= 1 else f"red blobs smaller than {cfg.min_area_px} px")
-    if predicted_px is not None and np.all(np.isfinite(predicted_px)):
-        target = min(blobs, key=lambda i: float(np.linalg.norm(centroids[i] + 0.5 - predicted_px)))
+        what = "red" if cfg.ripe_class in (None, "red") else f"ripe ({cfg.ripe_class} or riper)"
+        small = f"{what} blobs smaller than {cfg.min_area_px} px"
+        return NoDetection(f"no {what} blob" if not every else small)
+    predicted = None
+    if predicted_px is not None:
+        predicted = np.asarray(predicted_px, dtype=float).reshape(-1)
+        if predicted.shape != (2,) or not np.all(np.isfinite(predicted)):
+            predicted = None
+    target = _choose_blob(blobs, predicted)
+    # ---- the fruit in and around that blob, each with its own outer arcs
+    H, W = mask.shape
+    arcs: list[Arc] = []
+    near = _nearby(every, target)
+    for k, b in enumerate(near):
+        o = b.outline
+        usable = (o[:, 0] > 0) & (o[:, 0] < W - 1) & (o[:, 1] > 0) & (o[:, 1] < H - 1)
+        arcs += outline_arcs(o + 0.5, usable, k, corner_px=cfg.corner_px, margin=cfg.junction_margin)
+    # a fruit that is not a sphere is not a circle in the image: its outline lies inside
+    # the circle through its widest parts by up to the prior's shape spread (apparent
+    # radius ±s); the arcs inside by that much are still its own, count as seen, and the
+    # fit's own uncertainty may be larger by a share of it
+    shape = fruit.shape_spread_rel
+    found = group_arcs(arcs, tol_px=cfg.arc_tol_px, shape_rel=shape)
+    if not found:
+        return NoDetection("no stretch of the ripe blob's outline is a circle arc (no fruit silhouette)")
+    # a fruit that shows enough of its outline can be measured; one that shows less is
+    # still a fruit, unless its arcs lie inside a measurable one's circle (they are the
+    # edges of a stem or calyx over it)
+    whole: list[tuple[FruitOutline, float]] = []
+    part: list[tuple[FruitOutline, float]] = []
+    for fr in found:
+        seen = _arc_deg(fr.points, fr.circle.centre)
+        (whole if seen >= cfg.min_arc_deg else part).append((fr, seen))
+    part = [(fr, seen) for fr, seen in part if not any(_inside(fr, w.circle) for w, _ in whole)]
+    if predicted is not None:
+        chosen, seen = min(whole + part, key=lambda e: float(np.linalg.norm(e[0].circle.centre - predicted)))
     else:
-        target = max(blobs, key=lambda i: int(stats[i, cv2.CC_STAT_AREA]))
-    blob = (labels == target).astype(np.uint8)
-    contours, _ = cv2.findContours(blob, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    pts = np.vstack([c[:, 0, :] for c in contours]).astype(float)  # (x, y) pixel indices
-    h, w = blob.shape
-    inner = (pts[:, 0] > 0) & (pts[:, 0] < w - 1) & (pts[:, 1] > 0) & (pts[:, 1] < h - 1)
-    total = len(pts)
-    pts = pts[inner]
-    if len(pts) < cfg.min_boundary_points:
-        return NoDetection(f"only {len(pts)} silhouette points off the image edge")
-    uv = pts + 0.5  # pixel centres
-    centre = uv.mean(axis=0)
-    keep = np.ones(len(uv), dtype=bool)
-    threshold = cfg.outlier_px
-    for _ in range(8):
-        # the silhouette runs half a pixel outside the centres of the boundary pixels
-        d = uv - centre
-        edge = uv + 0.5 * d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
-        rays = intrinsics.rays(edge)
-        axis, cos_a = _fit_cone(rays[keep])
-        if not (0.0 < cos_a < 1.0) or axis[0] <= 0.0:
-            return NoDetection("silhouette fit failed (degenerate boundary)")
-        centre = intrinsics.project(axis)
-        # residual in pixels: positive = inside the cone (occluder edges, calyx); only
-        # inside points can be occlusion, so only they are trimmed, against a threshold
-        # that tightens to 3 robust σ of the points kept (never below 0.5 px)
-        alpha = math.acos(cos_a)
-        ang = np.arccos(np.clip(rays @ axis, -1.0, 1.0))
-        resid_px = (alpha - ang) * intrinsics.focal_px
-        kept = resid_px[keep]
-        sigma = 1.4826 * float(np.median(np.abs(kept - np.median(kept))))
-        threshold = min(threshold, max(0.5, 3.0 * sigma)) if keep.sum() < len(keep) else threshold
-        new_keep = _trim_corners(resid_px < threshold, margin=3)
-        if new_keep.sum() < cfg.min_boundary_points or np.array_equal(new_keep, keep):
-            break
-        keep = new_keep
-    sin_a = math.sin(alpha)
-    rho = fruit.radius_m / sin_a
+        own = [e for e in whole if 0 in e[0].blobs] or whole or part
+        chosen, seen = max(own, key=lambda e: len(e[0].points))
+    if seen < cfg.min_arc_deg:
+        return NoDetection(
+            f"only {seen:.0f} deg of the target's outline visible (< {cfg.min_arc_deg:.0f}): "
+            "hidden by its neighbours or occluders"
+        )
+    uv = chosen.points
+    uv = uv[hull_points(uv)]
+    if len(uv) < cfg.min_boundary_points:
+        return NoDetection(f"only {len(uv)} silhouette points of the target apart from its neighbours")
+    shape_px = shape * chosen.circle.radius
+    fit = _fit_silhouette(uv, chosen.circle.centre, intrinsics, cfg)
+    if isinstance(fit, str):
+        return NoDetection(fit)
+    # ---- is it one fruit, well seen?
     f = intrinsics.focal_px
+    if fit.keep.sum() < cfg.min_boundary_points:
+        return NoDetection(f"only {int(fit.keep.sum())} silhouette points left after trimming occluder edges")
+    # the outline seen: the points kept, and those a fruit that is not a sphere keeps
+    # inside the circle through its widest parts (its outline is an ellipse)
+    on_outline = fit.keep | ((fit.resid_px > 0.0) & (fit.resid_px < cfg.outlier_px + 0.5 * shape_px))
+    arc = _arc_deg(uv[on_outline], fit.centre)
+    if arc < cfg.min_arc_deg:
+        return NoDetection(f"only {arc:.0f} deg of the target's outline visible (< {cfg.min_arc_deg:.0f})")
+    rms = float(np.sqrt(np.mean(fit.resid_px[fit.keep] ** 2)))
+    if rms > cfg.max_fit_rms_px:
+        return NoDetection(f"merged blob or not a fruit: its outline fits a circle to {rms:.2f} px rms")
+    outside = float(np.mean(fit.resid_px < -cfg.outlier_px))
+    if outside > cfg.max_outside_share:
+        return NoDetection(
+            f"merged blob: {100 * outside:.0f}% of the target's outline lies outside its fitted circle"
+        )
+    radius_px = f * math.tan(fit.alpha)
+    if radius_px < cfg.min_radius_px:
+        return NoDetection(f"a speck of colour, not a fruit: apparent radius {radius_px:.1f} px")
+    lat_fit, alpha_fit = _fit_sigmas(fit, uv, f)
+    if lat_fit * f > cfg.max_fit_sigma_px + 0.25 * shape_px:
+        return NoDetection(
+            f"the visible arcs fix the target's centre only to {lat_fit * f:.1f} px (1 sigma): too little "
+            "of its outline, or a ragged one"
+        )
+    if expected_radius_px is not None and math.isfinite(expected_radius_px) and expected_radius_px > 0:
+        ratio = radius_px / expected_radius_px
+        if not 1.0 / (1.0 + cfg.size_tolerance_rel) <= ratio <= 1.0 + cfg.size_tolerance_rel:
+            return NoDetection(
+                f"apparent radius {radius_px:.1f} px is implausible for the predicted range "
+                f"(expected {expected_radius_px:.1f} px): a fragment, a merged blob or another fruit"
+            )
+    axis, alpha = fit.axis, fit.alpha
+    outline_points = sum(len(near[k].outline) for k in chosen.blobs)
+    rho = fruit.radius_m / math.sin(alpha)
     # covariance: lateral from the centre pixel error; range from the unknown true radius
-    # (uniform ±spread) and the pixel error of the apparent radius, dρ/dα = -ρ / tan α
-    sigma_lat = rho * measurement.centre_sigma_px / f
-    sigma_alpha = measurement.radius_sigma_px / f
-    sigma_rho = rho * math.hypot(fruit.radius_spread_rel / math.sqrt(3.0), sigma_alpha / math.tan(alpha))
+    # (uniform ±spread) and the pixel error of the apparent radius, dρ/dα = -ρ / tan α;
+    # each with the fit's own uncertainty (a short arc) added in quadrature
+    sigma_lat = rho * math.hypot(measurement.centre_sigma_px / f, lat_fit)
+    sigma_alpha = math.hypot(measurement.radius_sigma_px / f, alpha_fit)
+    sigma_rho = rho * math.hypot(fruit.size_spread_rel, sigma_alpha / math.tan(alpha))
     e1 = np.cross(axis, [0.0, 0.0, 1.0])
     e1 = e1 / np.linalg.norm(e1) if np.linalg.norm(e1) > 1e-9 else np.array([0.0, 1.0, 0.0])
     U = np.column_stack((axis, e1, np.cross(axis, e1)))
     cov = U @ np.diag([sigma_rho**2, sigma_lat**2, sigma_lat**2]) @ U.T
     return Detection(
-        centre_px=centre,
-        radius_px=f * math.tan(alpha),
+        centre_px=fit.centre,
+        radius_px=radius_px,
         bearing_camera=axis,
         angular_radius_rad=alpha,
         range_m=rho,
         p_camera=rho * axis,
         cov_camera=0.5 * (cov + cov.T),
-        area_px=int(stats[target, cv2.CC_STAT_AREA]),
-        boundary_points=int(keep.sum()),
-        trimmed_fraction=1.0 - float(keep.sum()) / max(total, 1),
+        area_px=_area_inside(mask, fit.centre, radius_px),
+        boundary_points=int(fit.keep.sum()),
+        trimmed_fraction=1.0 - float(fit.keep.sum()) / max(outline_points, 1),
     )

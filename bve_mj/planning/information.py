@@ -79,8 +79,9 @@ class RangeInformation:
 
 
 def observation_information(settings: Settings) -> ObservationInformation:
-    """The information model the planner uses under ``settings``."""
+    """The information model the planner uses under ``settings`` (``measurement.kind = "auto"``
+    outside a world is the paper's range measurement; the closed loop resolves it first)."""
     sigma_c = settings.sigma_c_m2()
-    if settings.planner.planning_model == "consistent" and settings.measurement.kind == "range":
+    if settings.planner.planning_model == "consistent" and settings.measurement.kind in ("range", "auto"):
         return RangeInformation(float(sigma_c[0, 0]))
     return CameraInformation(sigma_c)

@@ -54,10 +54,16 @@ def declared_noise(settings: Settings) -> tuple[MeasurementConfig, FruitPrior]:
 
 @dataclass
 class ViewTimings:
-    """Wall time of one view's stages [s] (planning is timed by the episode loop)."""
+    """Wall time of one view's stages [s] (planning is timed by the episode loop).
+
+    ``ik_s``: look-at IK in the move (zero when the plan carries its joint angles, as the
+    joint-space BVE's do: its IK is part of planning); ``control_s``: physics of the move;
+    ``record_s``: the ``on_step`` hook during the move (a video's frames), kept out of
+    ``control_s``."""
 
     ik_s: float = 0.0
     control_s: float = 0.0
+    record_s: float = 0.0
     render_s: float = 0.0
     detect_s: float = 0.0
 
@@ -163,11 +169,20 @@ class MujocoWorld:
             q_target = ik.q if ik.success else None
             self.last.ik_failed = not ik.success
         t1 = time.perf_counter()
+        timings = self.last.timings
+        hook = self._on_step
+        if hook is not None:
+
+            def timed(sim_time: float) -> None:
+                t = time.perf_counter()
+                hook(sim_time)
+                timings.record_s += time.perf_counter() - t
+
         if q_target is not None:  # an IK failure keeps the arm where it is
-            self.last.move = self.controller.move_to(q_target, self._on_step)
+            self.last.move = self.controller.move_to(q_target, None if hook is None else timed)
         self._target = np.asarray(plan.p_world_target, dtype=float).copy()
-        self.last.timings.ik_s = t1 - t0
-        self.last.timings.control_s = time.perf_counter() - t1
+        timings.ik_s = t1 - t0
+        timings.control_s = time.perf_counter() - t1 - timings.record_s
 
     def observe(self) -> Observation | None:
         t0 = time.perf_counter()
@@ -186,7 +201,7 @@ class MujocoWorld:
             self.last.image = image
         if not isinstance(det, Detection):
             return None
-        if s.measurement.kind == "camera":
+        if s.measurement.kind in ("camera", "auto"):  # auto: the camera here
             return Observation(det.p_camera, CameraModel(p, R, det.cov_camera))
         var = float(det.bearing_camera @ det.cov_camera @ det.bearing_camera)
         return Observation(np.array([det.range_m]), RangeModel(p, var))

@@ -44,7 +44,7 @@ class SyntheticWorld:
         self._target = np.asarray(plan.p_world_target, dtype=float).copy()
 
     def observe(self) -> Observation | None:
-        if self._settings.measurement.kind == "range":
+        if self._settings.measurement.kind in ("range", "auto"):  # auto: range here
             var = float(self._sigma_c[0, 0])
             z = np.linalg.norm(self._truth - self._c) + self._rng.standard_normal() * np.sqrt(var)
             return Observation(np.array([z]), RangeModel(self._c.copy(), var))

@@ -1,0 +1,111 @@
+"""The scenario suite: every scenario loads, compiles and steps cleanly; the runner's table and
+JSON; bad input."""
+
+from __future__ import annotations
+
+import json
+
+import mujoco
+import numpy as np
+import pytest
+
+from bve_mj.cli import main
+from bve_mj.robot import arm_kinematics
+from bve_mj.scenarios import SILENT_NEES, load_suite, run_suite, suite_dir, suite_json
+from bve_mj.sim.scene import build_scene
+
+REQUIRED = {
+    "clean", "truss_chain", "truss_cluster", "truss_mixed_ripeness", "cherry_truss", "beefsteak",
+    "plum", "turning", "heavy_occlusion", "backlit", "shadowed", "realistic_sensors",
+}  # fmt: skip
+
+
+def test_the_suite_holds_the_named_scenarios_each_described():
+    suite = load_suite()
+    assert {s.name for s in suite} >= REQUIRED
+    assert all(len(s.description) > 20 for s in suite)
+
+
+@pytest.mark.parametrize("name", sorted(REQUIRED))
+def test_every_scenario_compiles_and_steps_without_warnings(name):
+    (scenario,) = load_suite(only=[name])
+    s = scenario.settings()
+    kin = arm_kinematics(s.robot.name, s.robot.limit_set)
+    for seed in range(10):
+        spec, info = build_scene(kin, s.scene, np.random.default_rng(seed), s.camera)
+        model = spec.compile()
+        data = mujoco.MjData(model)
+        for _ in range(50):
+            mujoco.mj_step(model, data)
+        assert sum(w.number for w in data.warning) == 0, (name, seed)
+        lo = np.array([r[0] for r in (s.scene.target_x_m, s.scene.target_y_m, s.scene.target_z_m)])
+        hi = np.array([r[1] for r in (s.scene.target_x_m, s.scene.target_y_m, s.scene.target_z_m)])
+        assert np.all(info.target.centre_m >= lo - 1e-9) and np.all(info.target.centre_m <= hi + 1e-9)
+
+
+def test_runner_table_and_json(tmp_path):
+    out = tmp_path / "suite.json"
+    assert main(["scenarios", "--only", "clean", "--seeds", "2", "--workers", "1", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    clean = doc["scenarios"]["clean"]
+    for key in ("outcomes", "nees_mean", "inside_3sigma_pct", "silent_failures", "views_median", "runs"):
+        assert key in clean
+    assert set(clean["error_mm"]) == {"median", "p95", "max"}
+    assert sum(clean["outcomes"].values()) == len(clean["runs"]) == 2
+    assert clean["silent_failures"] == sum(
+        r["outcome"] in ("converged", "stable", "approached") and r["nees"] > SILENT_NEES
+        for r in clean["runs"]
+    )
+    assert doc["settings"]["clean"]["measurement"]["kind"] == "camera"
+
+
+def test_measurement_option_overrides_each_file_only_when_given():
+    (truss,) = load_suite(only=["truss_chain"])
+    assert truss.settings().measurement.kind == "camera"  # the file says nothing: auto
+    assert truss.settings("range").measurement.kind == "range"
+    result = run_suite([truss], seeds=1, workers=1, measurement="range")
+    assert result.settings["truss_chain"].measurement.kind == "range"
+    assert suite_json(result)["scenarios"]["truss_chain"]["runs"][0]["outcome"]
+
+
+def test_a_file_measurement_survives(tmp_path):
+    (tmp_path / "r.toml").write_text('# range only, as the paper\n[measurement]\nkind = "range"\n')
+    (sc,) = load_suite(tmp_path)
+    assert sc.settings().measurement.kind == "range"
+    assert sc.settings("camera").measurement.kind == "camera"
+
+
+@pytest.mark.parametrize(
+    ("toml", "field"),
+    [
+        ("[scene]\nfruit_per_truss = 0\n", "scene.fruit_per_truss"),
+        ("[scene]\nfruit_per_truss = 3\ntarget_index = 3\n", "scene.target_index"),
+        ('[scene]\nfruit_per_truss = 2\nripeness = ["red", "purple"]\n', "scene.ripeness"),
+        ("[scene]\nshape_index = [0.0, 1.0]\n", "scene.shape_index"),
+    ],
+)
+def test_bad_scenario_input_exits_2_naming_the_field(tmp_path, capsys, toml, field):
+    (tmp_path / "bad.toml").write_text(toml)
+    assert main(["scenarios", "--dir", str(tmp_path), "--seeds", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and field in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "field"),
+    [
+        (["scenarios", "--only", "nosuch"], "only"),
+        (["scenarios", "--seeds", "0"], "seeds"),
+        (["scenarios", "--measurement", "sonar"], "measurement"),
+        (["scenarios", "--dir", "/no/such/dir"], "scenarios"),
+        (["scenarios", "--json", "/no/such/dir/x.json"], "json"),
+    ],
+)
+def test_scenarios_cli_bad_input(argv, field, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and field in err
+
+
+def test_suite_dir_is_the_checkout_folder():
+    assert (suite_dir() / "clean.toml").is_file()
