@@ -27,13 +27,15 @@ if TYPE_CHECKING:
 __all__ = ["main"]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_NOT_LOCALISED = 0, 1, 2, 3
-NOT_LOCALISED = ("unreachable", "never_detected", "unreliable", "approach_blocked")
-"""Episode outcomes that exit 3: the fruit was out of the arm's reach, never seen, its estimate
-is not supported by the measurements, or (approach mode) the arm could not bring the camera
-close."""
+NOT_LOCALISED = ("unreachable", "never_detected", "ambiguous", "unreliable", "approach_blocked")
+"""Episode outcomes that exit 3: the fruit was out of the arm's reach, never seen (or never told
+apart from its neighbours), its estimate is not supported by the measurements, or (approach
+mode) the arm could not bring the camera close."""
 OUTCOME_NOTES = {
     "unreachable": "the arm cannot reach a pose that looks at the fruit's estimate: nothing was measured",
     "never_detected": "no view detected the fruit: the estimate is the prior",
+    "ambiguous": "more than one fruit in view fits the estimate about equally well, and no view told "
+    "which one is the target: nothing was measured, the estimate is the prior",
     "approach_blocked": "the arm found no reachable pose closer to the fruit (the camera stopped "
     "moving): the fruit is localised but not approached",
     "unreliable": "the final estimate is not supported by the measurements (fewer than two "
@@ -108,7 +110,11 @@ def _build_parser() -> argparse.ArgumentParser:
     ep.add_argument("--plots", default=None, help="write PREFIX_path.png and PREFIX_error.png")
     ep.add_argument("--json", default=None, help="write the episode log (settings, views, outcome) here")
     ep.add_argument("--quiet", action="store_true", help="print only the summary")
-    ep.add_argument("--initial-error", default=None, help="prior error half-width e0 [m] (default 0.05)")
+    ep.add_argument(
+        "--initial-error",
+        default=None,
+        help="prior error half-width e [m]: along the ray (episode.prior = detection) or per axis (cube); default 0.05",
+    )
 
     for name, helptext, desc in (
         (

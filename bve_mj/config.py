@@ -170,8 +170,18 @@ class FruitPrior:
         ),
     )
 
+    shape_index: float = field(
+        default=1.0,
+        metadata=_why(
+            "the shape index (height / width) the detector's spheroid fit starts from and is held "
+            "to where a view cannot see it (along the fruit's axis)"
+        ),
+    )
+
     def __post_init__(self) -> None:
         _positive("fruit", "radius_m", self.radius_m)
+        if not (isinstance(self.shape_index, (int, float)) and 0.4 <= self.shape_index <= 2.5):
+            raise ConfigError("fruit.shape_index", self.shape_index, "a number in [0.4, 2.5]")
         for name in ("radius_spread_rel", "shape_spread_rel"):
             value = getattr(self, name)
             _non_negative("fruit", name, value)
@@ -181,14 +191,16 @@ class FruitPrior:
     @classmethod
     def for_scene(cls, scene: SceneConfig) -> FruitPrior:
         """What the estimator assumes of a fruit of ``scene``'s type: the middle of its radius
-        range ± half its width, and a shape spread of half the largest departure of its shape
-        index from 1 (a spheroid looks up to that much larger or smaller than its equator)."""
+        range ± half its width, the middle of its shape-index range, and a shape spread of
+        half the largest departure of its shape index from 1 (a spheroid looks up to that
+        much larger or smaller than its equator)."""
         lo, hi = scene.radius_range_m
         s_lo, s_hi = scene.shape_index_range
         return cls(
             radius_m=0.5 * (lo + hi),
             radius_spread_rel=min((hi - lo) / (hi + lo), 0.99),
             shape_spread_rel=min(0.5 * max(abs(1.0 - s_lo), abs(1.0 - s_hi)), 0.99),
+            shape_index=min(max(0.5 * (s_lo + s_hi), 0.4), 2.5),
         )
 
     @property
@@ -775,6 +787,15 @@ class DetectorConfig:
         default=1.5,
         metadata=_why("boundary points this far inside the fitted circle are occluder edges", "px"),
     )
+    extend_hue_max: int = field(
+        default=25,
+        metadata=_why(
+            "skin up to this hue (orange-yellow: a highlight, a blush, uneven colour) counts as ripe "
+            "where it touches ripe pixels, so a red fruit's silhouette is whole; <= the ripe hue "
+            "limit turns it off (stems and leaves start at 38)",
+            "0-180",
+        ),
+    )
     ripe_class: str | None = field(
         default=None,
         metadata=_why(
@@ -840,6 +861,15 @@ class DetectorConfig:
         ),
     )
 
+    ambiguity_ratio: float = field(
+        default=20.0,
+        metadata=_why(
+            "when the estimate allows two fruit and the likelier is less than this many times as "
+            "likely (3-D Mahalanobis distance of each to the estimate), the view is ambiguous and "
+            "measures nothing"
+        ),
+    )
+
     @staticmethod
     def ripe_hue_limits() -> dict[str, int]:
         """The OpenCV hue (0-180) up to which the coloured skin of each ripeness class reaches,
@@ -850,7 +880,7 @@ class DetectorConfig:
         return {"red": 8, "light_red": 30, "pink": 34, "turning": 37, "orange": 37}
 
     def __post_init__(self) -> None:
-        for name in ("red_hue_max", "red_hue_min_wrap", "min_saturation", "min_value"):
+        for name in ("red_hue_max", "red_hue_min_wrap", "min_saturation", "min_value", "extend_hue_max"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 255:
                 raise ConfigError(f"detector.{name}", v, "an integer in [0, 255]")
@@ -870,6 +900,10 @@ class DetectorConfig:
         _positive("detector", "max_fit_sigma_px", self.max_fit_sigma_px)
         _non_negative("detector", "min_radius_px", self.min_radius_px)
         _positive("detector", "size_tolerance_rel", self.size_tolerance_rel)
+        if isinstance(self.ambiguity_ratio, bool) or not (
+            isinstance(self.ambiguity_ratio, (int, float)) and 1.0 < self.ambiguity_ratio < math.inf
+        ):
+            raise ConfigError("detector.ambiguity_ratio", self.ambiguity_ratio, "a finite number > 1")
 
     @property
     def ripe_hue_max(self) -> int:
@@ -936,8 +970,26 @@ class EpisodeConfig:
     )
     band_tolerance_m: float = field(default=0.08, metadata=_why("distance band half-width", "m"))
     step_m: float = field(default=0.10, metadata=_why("step limit: ~20 deg of view change at 0.3 m", "m"))
+    prior: str = field(
+        default="detection",
+        metadata=_why(
+            "how the prior is made. detection: the target picked in a first image from the ready pose "
+            "(which looks at a coarse guess, fruit + U[-e, e]^3): the prior mean lies on the ray to "
+            "the fruit, its range off by U[-e, e] and its bearing by U[-l, l] each way "
+            "(l = initial_lateral_error_m), the covariance elongated to match. cube: the paper's "
+            "protocol, mean = fruit + U[-e, e]^3, isotropic; in a truss of touching fruit 5 cm apart "
+            "it does not say which fruit is meant (episodes end ambiguous)"
+        ),
+    )
     initial_error_m: float = field(
-        default=0.05, metadata=_why("prior mean = fruit + U[-e, e]^3 (a coarse first detection)", "m")
+        default=0.05,
+        metadata=_why("e: the prior's range error (detection) or error per axis (cube)", "m"),
+    )
+    initial_lateral_error_m: float = field(
+        default=0.01,
+        metadata=_why(
+            "l: the detection prior's error across the ray, each way (a first detection's bearing)", "m"
+        ),
     )
     stop_sigma_m: float = field(
         default=0.0015, metadata=_why("stop when the largest posterior std falls below this", "m")
@@ -982,6 +1034,9 @@ class EpisodeConfig:
         for f in ("band_distance_m", "band_tolerance_m", "step_m", "stop_sigma_m", "approach_distance_m"):
             _positive("episode", f, getattr(self, f))
         _non_negative("episode", "initial_error_m", self.initial_error_m)
+        _non_negative("episode", "initial_lateral_error_m", self.initial_lateral_error_m)
+        if self.prior not in ("detection", "cube"):
+            raise ConfigError("episode.prior", self.prior, "detection or cube")
         _non_negative("episode", "stop_stable_m", self.stop_stable_m)
         _non_negative("episode", "stall_m", self.stall_m)
         _non_negative("episode", "approach_wall_distance_m", self.approach_wall_distance_m)

@@ -133,8 +133,9 @@ def run_episode(
 ) -> EpisodeResult:
     """Observe from the start pose, then up to ``steps`` times: plan, move, predict, observe,
     update; ``stop`` may end it early. Outcome: the rule that ended it, "max_views", or
-    "never_detected" when no view measured the fruit; "unreliable" instead when the final
-    estimate is not supported by the measurements (:func:`supported`).
+    "never_detected" when no view measured the fruit ("ambiguous" when some view saw more
+    than one fruit the estimate allows, event ``ambiguous``); "unreliable" instead when the
+    final estimate is not supported by the measurements (:func:`supported`).
 
     A planner that fails (raises a :class:`BveError`, a numerical error, or returns a
     non-finite point) does not end the episode: the camera holds where it is, looking at the
@@ -155,7 +156,7 @@ def run_episode(
 
     def fuse(i: int, status: PlanStatus | None, feasible: bool, plan_s: float, events: list[str]) -> None:
         nonlocal belief
-        obs = world.observe()
+        obs = world.observe(belief)
         measured, accepted, nis = obs is not None, False, float("nan")
         if obs is not None:
             try:
@@ -176,7 +177,7 @@ def run_episode(
             belief, accepted, nis = result.belief, result.accepted, result.nis
         info = world.view_info() if hasattr(world, "view_info") else None
         if info is not None:
-            events += [str(e) for e in info.get("faults", [])]
+            events += [str(e) for e in (*info.get("events", []), *info.get("faults", []))]
             if info.get("ik_failed") and "ik_failure" not in events:
                 events.append("ik_failed")
         views.append(
@@ -201,11 +202,14 @@ def run_episode(
         outcome = stop.outcome(views) if stop is not None else None
         if outcome is not None:
             break
-    if not any(v.measured for v in views):
-        outcome = "never_detected"  # whatever stopped it: nothing was ever measured
+    if not any(v.measured for v in views):  # whatever stopped it: nothing was ever measured
+        ambiguous = any("ambiguous" in v.events for v in views)
+        outcome = "ambiguous" if ambiguous else "never_detected"
     elif outcome is None:
         outcome = "max_views"
-    if outcome != "never_detected" and not supported(views, filter_config.reset_after_rejections):
+    if outcome not in ("never_detected", "ambiguous") and not supported(
+        views, filter_config.reset_after_rejections
+    ):
         outcome = "unreliable"
     return EpisodeResult(prior, tuple(views), time.perf_counter() - t0, outcome)
 

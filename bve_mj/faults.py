@@ -56,13 +56,13 @@ class FaultyWorld:
             return
         self.world.move_camera(plan)
 
-    def observe(self) -> Observation | None:
+    def observe(self, belief: Belief | None = None) -> Observation | None:
         f = self.faults
         u_drop, u_kind = self._rng.random(2)
         direction = self._rng.standard_normal(3)
         direction /= np.linalg.norm(direction)
         offset_m, sigmas = self._rng.uniform(0.05, 0.30), self._rng.uniform(10.0, 50.0)
-        obs = self.world.observe()
+        obs = self.world.observe(belief)
         if self._view in f.hidden_views or u_drop < f.drop_p:
             self._events.append("dropped")
             return None

@@ -14,7 +14,7 @@ from typing import Any, Protocol
 import mujoco
 import numpy as np
 
-from bve_mj.config import Settings, settings_to_dict
+from bve_mj.config import EpisodeConfig, Settings, settings_to_dict
 from bve_mj.episode import EpisodeResult, StopRules, ViewRecord, run_episode
 from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
@@ -164,6 +164,27 @@ def _start_configuration(
     return best[1]
 
 
+def detection_prior(
+    p_world_camera: np.ndarray, truth: np.ndarray, ep: EpisodeConfig, rng: np.random.Generator
+) -> Belief:
+    """The prior a first detection of the target from ``p_world_camera`` gives: on the ray to
+    the fruit, its range off by U[-e, e] (e = ``initial_error_m``; apparent size is a coarse
+    range cue) and its bearing by U[-l, l] in each direction across the ray
+    (l = ``initial_lateral_error_m``); covariance with those uniforms' σ along and across the
+    ray (at least 1 mm). It says which fruit is meant, where a cube around the fruit, in a
+    truss, does not."""
+    ray = truth - p_world_camera
+    rho = float(np.linalg.norm(ray))
+    d = ray / rho
+    e1 = np.cross(d, [0.0, 0.0, 1.0])
+    e1 = e1 / np.linalg.norm(e1) if np.linalg.norm(e1) > 1e-9 else np.array([0.0, 1.0, 0.0])
+    U = np.column_stack((d, e1, np.cross(d, e1)))
+    e, lat = ep.initial_error_m, ep.initial_lateral_error_m
+    offset = rng.uniform(-1.0, 1.0, 3) * np.array([e, lat, lat])
+    sigmas = np.maximum(np.array([e, lat, lat]) / math.sqrt(3.0), 1e-3)
+    return Belief(truth + U @ offset, U @ np.diag(sigmas**2) @ U.T)
+
+
 def run_mujoco_episode(
     settings: Settings,
     seed: int,
@@ -193,12 +214,14 @@ def run_mujoco_episode(
     model = spec.compile()
     prior_rng = np.random.default_rng(prior_ss)
     truth = info.target.centre_m
-    mean = truth + prior_rng.uniform(-ep.initial_error_m, ep.initial_error_m, 3)
-    prior = Belief.isotropic(mean, max(ep.initial_error_m / math.sqrt(3.0), 1e-3))
+    coarse = truth + prior_rng.uniform(-ep.initial_error_m, ep.initial_error_m, 3)
+    cube = Belief.isotropic(coarse, max(ep.initial_error_m / math.sqrt(3.0), 1e-3))
     try:
-        q_start = _start_configuration(kin, mean, ep.band_distance_m, prior_rng)
+        q_start = _start_configuration(kin, coarse, ep.band_distance_m, prior_rng)
     except PlanningError:  # the fruit is out of the arm's reach: a clear outcome, not a crash
-        return MujocoEpisode(EpisodeResult(prior, (), 0.0, "unreachable"), info, s, seed, kin.home.copy())
+        return MujocoEpisode(EpisodeResult(cube, (), 0.0, "unreachable"), info, s, seed, kin.home.copy())
+    prior = cube if ep.prior == "cube" else detection_prior(kin.camera_pose(q_start)[0], truth, ep, prior_rng)
+    mean = prior.mean
     world = MujocoWorld(
         s, kin, model, info, q_start, mean, np.random.default_rng(sensor_ss),
         keep_images=recorder is not None,

@@ -16,7 +16,7 @@ import pytest
 from bve_mj.config import CameraConfig, DetectorConfig, FruitPrior, MeasurementConfig
 from bve_mj.errors import ConfigError
 from bve_mj.geometry import camera_rotation
-from bve_mj.perception import Detection, Intrinsics, NoDetection, detect, ripe_mask
+from bve_mj.perception import Detection, Intrinsics, NoDetection, Prediction, detect, ripe_mask
 from bve_mj.perception.instances import concave_corners, group_arcs, hull_points, outline_arcs
 from bve_mj.robot import ArmKinematics, get_robot
 from bve_mj.sim.render import OffscreenRenderer
@@ -234,6 +234,55 @@ def test_a_target_partly_hidden_behind_a_nearer_neighbour_is_measured_or_refused
     assert refused >= 1  # the most hidden is too little to measure
 
 
+def _prediction(p_world, p, R, sigma_m):
+    return Prediction(R.T @ (np.asarray(p_world, dtype=float) - p), np.eye(3) * sigma_m**2)
+
+
+def test_touching_fruit_through_the_closed_loop_path(trusses):
+    """The grid again, as the closed loop calls the detector: the estimate 5 mm off with a
+    5 mm σ picks its fruit in 3-D, and the fruit is fitted as a spheroid with the world's
+    vertical as its axis (these are spheres: the fit must find that too). Never a wrong
+    measurement, never ambiguous, most measured."""
+    probe, clusters = trusses
+    counts = {"measured": 0, "refused": 0, "wrong": 0}
+    wrong, ambiguous = [], []
+    for name, fruits in clusters.items():
+        target = fruits[0]
+        for distance in (0.15, 0.25, 0.4):
+            for azimuth in (-40, -20, 0, 20, 40):
+                img, centre, radius, (p, R) = probe.view(target, distance, azimuth, 15, (0.0, 0.004, -0.003))
+                estimate = _prediction(target.centre_m + [0.003, -0.003, 0.003], p, R, 0.005)
+                det = detect(img, INTRINSICS, PRIOR, MEAS, prediction=estimate, up_camera=R.T[:, 2])
+                v = verdict(det, centre, radius)
+                counts[v] += 1
+                if v == "wrong":
+                    wrong.append(((name, distance, azimuth), np.linalg.norm(det.centre_px - centre)))
+                if isinstance(det, NoDetection) and det.ambiguous:
+                    ambiguous.append((name, distance, azimuth))
+    assert not wrong, wrong
+    assert not ambiguous, ambiguous
+    assert counts["measured"] >= 0.85 * sum(counts.values()), counts
+
+
+def test_an_estimate_that_allows_two_touching_fruit_is_ambiguous(trusses):
+    """Between two touching fruit with a 3 cm σ, the estimate fits both: no measurement, and
+    the reason says so. Narrowed on either fruit, that fruit is measured."""
+    probe, clusters = trusses
+    a, b = clusters["pair, side by side"]
+    img, _, _, (p, R) = probe.view(a, 0.3, 10, 5)
+    between = _prediction(0.5 * (a.centre_m + b.centre_m), p, R, 0.03)
+    det = detect(img, INTRINSICS, PRIOR, MEAS, prediction=between, up_camera=R.T[:, 2])
+    assert isinstance(det, NoDetection) and det.ambiguous and "likelihood ratio" in det.reason, det
+    for fruit in (a, b):
+        det = detect(img, INTRINSICS, PRIOR, MEAS, prediction=_prediction(fruit.centre_m, p, R, 0.008))
+        assert verdict(det, *truth(fruit, p, R)) == "measured", (fruit.name, det)
+    # a likelihood ratio the setting accepts as decisive: the likelier one is measured
+    loose = DetectorConfig(ambiguity_ratio=1.0001)
+    off_a = _prediction(a.centre_m + 0.3 * (b.centre_m - a.centre_m), p, R, 0.03)
+    det = detect(img, INTRINSICS, PRIOR, MEAS, loose, prediction=off_a)
+    assert verdict(det, *truth(a, p, R)) == "measured", det
+
+
 # --------------------------------------------------------------------------- one fruit
 def test_a_lone_red_sphere_keeps_its_accuracy(singles):
     rng = np.random.default_rng(3)
@@ -340,6 +389,29 @@ def test_the_ripe_setting_decides_whether_an_orange_fruit_is_seen(singles):
                 assert informative(det.reason) and "red blob" not in det.reason, det.reason
 
 
+def test_orange_skin_joins_the_red_it_touches_but_a_blended_rim_does_not():
+    """A red fruit with an orange highlight across its edge: the highlight is its skin and
+    the mask is the whole disc; an orange rim a pixel wide (red blended into green leaves)
+    does not join; an orange patch apart from any red is not ripe."""
+    hsv = np.zeros((200, 300, 3), np.uint8)
+    hsv[...] = (60, 160, 90)  # leaves
+    cv2.circle(hsv, (100, 100), 50, (175, 220, 180), -1)  # red (hue wraps)
+    cv2.circle(hsv, (100, 100), 52, (20, 200, 150), 1)  # the blended rim
+    cv2.circle(hsv, (140, 100), 22, (14, 220, 220), -1)  # an orange highlight across its edge
+    cv2.circle(hsv, (240, 100), 20, (14, 220, 220), -1)  # an orange fruit, alone
+    img = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+    disc = _discs(img.shape[:2], [((100, 100), 50)]) > 0
+    highlight = _discs(img.shape[:2], [((140, 100), 22)]) > 0
+    mask = ripe_mask(img, DetectorConfig()) > 0
+    assert mask[disc & ~highlight].all()
+    assert mask[highlight].mean() > 0.98  # all but a pixel-wide tip or two
+    rim = (_discs(img.shape[:2], [((100, 100), 54)]) > 0) & ~disc & ~highlight
+    assert mask[rim].mean() < 0.01  # a pixel or two where it meets the highlight
+    assert not mask[:, 200:].any()
+    plain = ripe_mask(img, DetectorConfig(extend_hue_max=0)) > 0
+    assert not plain[highlight & ~disc].any()
+
+
 def test_detector_config_validates_the_new_settings():
     with pytest.raises(ConfigError, match=r"detector\.ripe_class"):
         DetectorConfig(ripe_class="purple")
@@ -350,6 +422,11 @@ def test_detector_config_validates_the_new_settings():
     limits = DetectorConfig.ripe_hue_limits()
     assert list(limits.values()) == sorted(limits.values())  # riper classes: narrower hue windows
     assert DetectorConfig(ripe_class="red").ripe_hue_max == DetectorConfig().red_hue_max
+    for bad in (1.0, 0.5, float("inf"), True):
+        with pytest.raises(ConfigError, match=r"detector\.ambiguity_ratio"):
+            DetectorConfig(ambiguity_ratio=bad)
+    with pytest.raises(ConfigError, match=r"detector\.extend_hue_max"):
+        DetectorConfig(extend_hue_max=300)
 
 
 # --------------------------------------------------------------------------- synthetic masks

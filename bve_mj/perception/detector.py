@@ -13,16 +13,19 @@ fit repeated. Range is exact: ρ = r / sin α, r the radius the estimator assume
 Touching fruit: the tomatoes of a truss touch, so a ripe blob is usually several fruit, and
 a fruit of uneven colour (or with a stem across it) several blobs. The outlines of the blob
 the prediction falls on and of the blobs around it are cut into arcs at their corners and
-grouped into fruit, one circle each (:mod:`bve_mj.perception.instances`); the fruit whose
-circle is nearest the predicted projection is the target, and only its own outer arcs are
-fitted: where it meets a neighbour there is no outline (red on red) and the blended points
+grouped into fruit, one circle each (:mod:`bve_mj.perception.instances`); the target is
+the fruit the estimate means (given its mean and covariance: least 3-D Mahalanobis distance,
+and "ambiguous" when another is about as likely; else the circle nearest the predicted
+projection), and only its own outer arcs are fitted: where it meets a neighbour there is no outline (red on red) and the blended points
 at the junction are left out, and the arcs of its fragments are fitted together (those on
 their common convex hull). The fit is then checked: enough of the outline seen, a circle
 that fits it, none of its points well outside, a centre the arcs pin down, a radius no
 speck has, and (when the caller knows the predicted range) an apparent size the prior
 allows. A target that fails says why, in a :class:`NoDetection`: a merged blob is never
-measured as one fruit. What passes has a covariance that includes the fit's own
-uncertainty.
+measured as one fruit. Where the caller gives the world's vertical, the cone is refined into
+a spheroid with that axis (:mod:`bve_mj.perception.spheroid`): a tomato is flatter or taller
+than wide, and a circle through its equator misplaces its centre. What passes has a
+covariance that includes the fit's own uncertainty.
 
 Frames: the paper's camera frame (x optical axis, y left, z up); pixels u right, v down.
 """
@@ -38,8 +41,12 @@ import numpy as np
 from bve_mj.config import CameraConfig, DetectorConfig, FruitPrior, MeasurementConfig
 from bve_mj.geometry import pixel_rays, project_point
 from bve_mj.perception.instances import Arc, Circle, FruitOutline, group_arcs, hull_points, outline_arcs
+from bve_mj.perception.spheroid import SpheroidFit, fit_spheroid, grazing_residuals
 
-__all__ = ["Detection", "Intrinsics", "NoDetection", "detect", "red_mask", "ripe_mask"]
+__all__ = ["Detection", "Intrinsics", "NoDetection", "Prediction", "detect", "red_mask", "ripe_mask"]
+
+_OPEN_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+_CHI2_3_999 = 16.266  # χ²(3) quantile at 0.999: a candidate the estimate allows
 
 
 @dataclass(frozen=True)
@@ -96,18 +103,47 @@ class Detection:
 
 @dataclass(frozen=True)
 class NoDetection:
-    """Nothing measured, and why."""
+    """Nothing measured, and why (``ambiguous``: more than one fruit fits the estimate)."""
 
     reason: str
+
+    @property
+    def ambiguous(self) -> bool:
+        return self.reason.startswith("ambiguous")
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Where the estimate puts the target, in the camera frame (x optical axis, y left, z up):
+    N(p_camera, cov_camera) [m]. It picks the target among the fruit in view by Mahalanobis
+    distance in 3-D (bearing and size-based range), not by pixel distance: a neighbour
+    nearer in the image but at the wrong range, or outside the estimate's spread, loses."""
+
+    p_camera: np.ndarray
+    cov_camera: np.ndarray
 
 
 def ripe_mask(image_rgb: np.ndarray, cfg: DetectorConfig) -> np.ndarray:
     """Pixels of ripe hue (``cfg.ripe_hue_max``: red, or up to the ripeness class the
-    settings accept; red wraps around hue 180), saturated and lit enough: uint8 mask 0/255."""
+    settings accept; red wraps around hue 180), saturated and lit enough, and the skin of
+    those fruit that a highlight or uneven colour turns orange (hue up to
+    ``cfg.extend_hue_max``, in a region that touches ripe pixels): uint8 mask 0/255."""
     hsv = cv2.cvtColor(image_rgb, cv2.COLOR_RGB2HSV)
     low = (cfg.min_saturation, cfg.min_value)
-    ripe = cv2.inRange(hsv, (0, *low), (cfg.ripe_hue_max, 255, 255))
-    return cv2.bitwise_or(ripe, cv2.inRange(hsv, (cfg.red_hue_min_wrap, *low), (255, 255, 255)))
+    wrap = cv2.inRange(hsv, (cfg.red_hue_min_wrap, *low), (255, 255, 255))
+    ripe = cv2.bitwise_or(cv2.inRange(hsv, (0, *low), (cfg.ripe_hue_max, 255, 255)), wrap)
+    if cfg.extend_hue_max <= cfg.ripe_hue_max:
+        return ripe
+    skin = cv2.bitwise_or(cv2.inRange(hsv, (0, *low), (cfg.extend_hue_max, 255, 255)), wrap)
+    # only patches: the rim where red blends into green leaves is orange too, a pixel or
+    # two wide; opening removes it (and any other sliver) before the patches join the red
+    patch = cv2.morphologyEx(cv2.bitwise_and(skin, cv2.bitwise_not(ripe)), cv2.MORPH_OPEN, _OPEN_KERNEL)
+    skin = cv2.bitwise_or(ripe, patch)
+    n, labels = cv2.connectedComponents(skin, connectivity=8)
+    touching = np.zeros(n, dtype=bool)
+    touching[np.unique(labels[ripe > 0])] = True
+    touching[0] = False
+    return np.where(touching[labels], 255, 0).astype(np.uint8)
 
 
 red_mask = ripe_mask
@@ -186,6 +222,41 @@ def _fit_silhouette(
             break
         keep = new_keep
     return _Fit(axis, alpha, centre, keep, resid_px, rays)
+
+
+def _refine_spheroid(
+    fit: _Fit, up: np.ndarray, fruit: FruitPrior, cfg: DetectorConfig, f: float, shape_px: float
+) -> SpheroidFit | None:
+    """The spheroid (axis ``up``) through the outline the circle fit saw, trimmed again by its
+    own residuals: the top and bottom of a flattened fruit, which lie inside the circle
+    through its equator, are its outline again, not occluder edges. None (keep the circle)
+    when it fails or strays from the circle by more than the shape allows."""
+    n_up = float(np.linalg.norm(up))
+    if not (np.all(np.isfinite(up)) and n_up > 1e-9):
+        return None
+    up = up / n_up
+    resid = fit.resid_px
+    use = (resid < cfg.outlier_px + shape_px) & (resid > -2.0 * cfg.outlier_px)
+    prior_log = max(fruit.shape_spread_rel, 0.05)
+    sph = None
+    for _ in range(2):
+        if use.sum() < cfg.min_boundary_points:
+            return None
+        sph = fit_spheroid(fit.rays[use], up, fit.axis, fit.alpha, fruit.shape_index, prior_log, 1.0 / f)
+        if sph is None:
+            return None
+        r_all = f * grazing_residuals(sph.p, sph.shape_index, up, fit.rays)
+        new_use = _trim_corners((r_all < cfg.outlier_px) & (r_all > -2.0 * cfg.outlier_px), margin=3)
+        if np.array_equal(new_use, use):
+            break
+        use = new_use
+    if sph is None:
+        return None
+    object.__setattr__(sph, "resid_rad", r_all / f)  # of every outline point, for the checks
+    moved_px = float(np.linalg.norm(f * (sph.axis - fit.axis)))
+    if moved_px > shape_px + 2.0 or abs(sph.alpha / fit.alpha - 1.0) > 2.0 * fruit.shape_spread_rel + 0.05:
+        return None
+    return sph
 
 
 def _arc_deg(uv: np.ndarray, centre: np.ndarray) -> float:
@@ -283,6 +354,43 @@ def _nearby(blobs: list[_Blob], target: _Blob, limit: int = 12) -> list[_Blob]:
     return [target, *near[:limit]]
 
 
+def _in_window(blobs: list[_Blob], centre: np.ndarray, half_px: float) -> list[_Blob]:
+    """The blobs whose boxes meet the square of half-width ``half_px`` around ``centre``."""
+    x0, y0 = centre - half_px
+    x1, y1 = centre + half_px
+    return [
+        b
+        for b in blobs
+        if b.box[0] <= x1 and b.box[0] + b.box[2] >= x0 and b.box[1] <= y1 and b.box[1] + b.box[3] >= y0
+    ]
+
+
+def _rough_measurement(
+    circle: Circle, intrinsics: Intrinsics, fruit: FruitPrior
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """A fruit's centre in the camera frame from its grouped circle alone, with a generous
+    covariance (a sixth of the radius in the centre, 15% in the apparent size, the prior's
+    size spread): enough to tell which fruit the estimate means. None for a degenerate one."""
+    f = intrinsics.focal_px
+    ray = intrinsics.rays(circle.centre)[0]
+    alpha = math.atan(circle.radius / f)
+    if not (0.0 < alpha < 1.5) or ray[0] <= 0.0:
+        return None
+    rho = fruit.radius_m / math.sin(alpha)
+    sigma_lat = rho * max(2.0, circle.radius / 6.0) / f
+    sigma_rho = rho * math.hypot(fruit.size_spread_rel, 0.15)
+    return rho * ray, _along_across(ray, sigma_rho, sigma_lat)
+
+
+def _along_across(axis: np.ndarray, sigma_along: float, sigma_across: float) -> np.ndarray:
+    """Covariance with σ ``sigma_along`` along the unit ``axis`` and ``sigma_across`` across."""
+    e1 = np.cross(axis, [0.0, 0.0, 1.0])
+    e1 = e1 / np.linalg.norm(e1) if np.linalg.norm(e1) > 1e-9 else np.array([0.0, 1.0, 0.0])
+    U = np.column_stack((axis, e1, np.cross(axis, e1)))
+    cov = U @ np.diag([sigma_along**2, sigma_across**2, sigma_across**2]) @ U.T
+    return 0.5 * (cov + cov.T)
+
+
 def _area_inside(mask: np.ndarray, centre: np.ndarray, radius: float) -> int:
     """Ripe pixels within the fitted circle (plus a pixel): the fruit's visible area."""
     H, W = mask.shape
@@ -296,6 +404,44 @@ def _area_inside(mask: np.ndarray, centre: np.ndarray, radius: float) -> int:
     return int(np.count_nonzero(inside & (mask[y0:y1, x0:x1] > 0)))
 
 
+def _associate(
+    fruits: list[tuple[FruitOutline, float]],
+    prediction: Prediction,
+    intrinsics: Intrinsics,
+    fruit: FruitPrior,
+    cfg: DetectorConfig,
+) -> tuple[FruitOutline, float] | NoDetection:
+    """The fruit the prediction means: least Mahalanobis distance between its rough 3-D
+    centre and the prediction; ambiguous when another fruit (not the same one seen twice:
+    circles apart by more than half a radius) is allowed by the prediction and about as
+    likely."""
+    scored = []
+    for fr, seen in fruits:
+        rough = _rough_measurement(fr.circle, intrinsics, fruit)
+        if rough is None:
+            continue
+        z, R = rough
+        nu = z - prediction.p_camera
+        d2 = float(nu @ np.linalg.solve(prediction.cov_camera + R, nu))
+        scored.append((d2, fr, seen))
+    if not scored:
+        return NoDetection("no fruit silhouette in the ripe blobs near the estimate")
+    scored.sort(key=lambda e: e[0])
+    d2_best, best, seen_best = scored[0]
+    margin = 2.0 * math.log(cfg.ambiguity_ratio)
+    for d2, other, _ in scored[1:]:
+        apart = float(np.linalg.norm(other.circle.centre - best.circle.centre))
+        if apart <= 0.5 * max(best.circle.radius, other.circle.radius):
+            continue  # the same fruit, in two groups of arcs
+        if d2 <= _CHI2_3_999 and d2 - d2_best < margin:
+            return NoDetection(
+                f"ambiguous: two fruit fit the estimate (Mahalanobis^2 {d2_best:.1f} and {d2:.1f}, "
+                f"likelihood ratio {math.exp(0.5 * (d2 - d2_best)):.1f} < {cfg.ambiguity_ratio:g})"
+            )
+        break  # sorted: the rest are less likely still
+    return best, seen_best
+
+
 def detect(
     image_rgb: np.ndarray,
     intrinsics: Intrinsics,
@@ -305,6 +451,8 @@ def detect(
     predicted_px: np.ndarray | None = None,
     *,
     expected_radius_px: float | None = None,
+    prediction: Prediction | None = None,
+    up_camera: np.ndarray | None = None,
 ) -> Detection | NoDetection:
     """Measure the target tomato in an RGB image.
 
@@ -316,6 +464,14 @@ def detect(
         expected_radius_px: the apparent radius the estimate predicts (f·tan asin(r/ρ) at
             the predicted range), if known: a fit off by more than ``size_tolerance_rel`` is
             refused (a fragment, a merged blob, a neighbour).
+        prediction: the estimate in the camera frame, with its covariance (replaces
+            ``predicted_px``): the fruit around its projection (within its 3σ spread) are
+            candidates, the one nearest in 3-D Mahalanobis distance is the target, and when
+            another is about as likely (likelihood ratio below ``ambiguity_ratio``, and
+            allowed by the estimate) there is no detection: ``ambiguous``.
+        up_camera: the world's vertical in the camera frame (unit, (3,)), if known: the
+            fruit is fitted as a spheroid with that axis (its centre unbiased for a fruit
+            that is flatter or taller than wide), else as a sphere.
     Returns:
         a :class:`Detection`, or a :class:`NoDetection` saying why (never raises on bad
         images: a wrong shape or dtype is a reason too).
@@ -338,11 +494,29 @@ def detect(
         predicted = np.asarray(predicted_px, dtype=float).reshape(-1)
         if predicted.shape != (2,) or not np.all(np.isfinite(predicted)):
             predicted = None
+    f = intrinsics.focal_px
+    window_px = 0.0
+    if prediction is not None:
+        m = np.asarray(prediction.p_camera, dtype=float)
+        if m.shape != (3,) or not np.all(np.isfinite(m)) or m[0] <= 1e-3:
+            prediction = None  # behind the camera: the prediction cannot pick a fruit
+        else:
+            predicted = intrinsics.project(m)
+            spread = float(np.sqrt(max(np.linalg.eigvalsh(prediction.cov_camera)[-1], 0.0)))
+            window_px = min(f * (3.0 * spread + fruit.radius_m * 1.2) / m[0] + 4.0, float(max(mask.shape)))
     target = _choose_blob(blobs, predicted)
-    # ---- the fruit in and around that blob, each with its own outer arcs
+    # ---- the fruit in and around that blob (and, with a prediction, in and around every
+    # blob within its spread), each with its own outer arcs
     H, W = mask.shape
     arcs: list[Arc] = []
     near = _nearby(every, target)
+    if prediction is not None and predicted is not None:
+        seen_ids = {id(b) for b in near}
+        for b in _in_window(blobs, predicted, window_px):
+            for n in _nearby(every, b, limit=6):
+                if id(n) not in seen_ids and len(near) < 32:
+                    near.append(n)
+                    seen_ids.add(id(n))
     for k, b in enumerate(near):
         o = b.outline
         usable = (o[:, 0] > 0) & (o[:, 0] < W - 1) & (o[:, 1] > 0) & (o[:, 1] < H - 1)
@@ -364,7 +538,12 @@ def detect(
         seen = _arc_deg(fr.points, fr.circle.centre)
         (whole if seen >= cfg.min_arc_deg else part).append((fr, seen))
     part = [(fr, seen) for fr, seen in part if not any(_inside(fr, w.circle) for w, _ in whole)]
-    if predicted is not None:
+    if prediction is not None:
+        pick = _associate(whole + part, prediction, intrinsics, fruit, cfg)
+        if isinstance(pick, NoDetection):
+            return pick
+        chosen, seen = pick
+    elif predicted is not None:
         chosen, seen = min(whole + part, key=lambda e: float(np.linalg.norm(e[0].circle.centre - predicted)))
     else:
         own = [e for e in whole if 0 in e[0].blobs] or whole or part
@@ -382,29 +561,52 @@ def detect(
     fit = _fit_silhouette(uv, chosen.circle.centre, intrinsics, cfg)
     if isinstance(fit, str):
         return NoDetection(fit)
+    # ---- a spheroid with the fruit's axis, where the caller knows it (the circle through a
+    # flattened fruit's equator is off by the difference of its semi-axes); the checks then
+    # take its residuals, and the shape no longer loosens them
+    sph = None
+    if up_camera is not None:
+        sph = _refine_spheroid(fit, np.asarray(up_camera, dtype=float), fruit, cfg, f, shape_px)
+        if sph is None:
+            return NoDetection(
+                "no spheroid with the fruit's axis fits the outline: a fragment or not a fruit"
+            )
+    if sph is not None:
+        resid_px = f * sph.resid_rad
+        keep = _trim_corners((resid_px < cfg.outlier_px) & (resid_px > -2.0 * cfg.outlier_px), margin=3)
+        axis, alpha, centre, slack_px = sph.axis, sph.alpha, intrinsics.project(sph.axis), 0.0
+    else:
+        resid_px, keep = fit.resid_px, fit.keep
+        axis, alpha, centre, slack_px = fit.axis, fit.alpha, fit.centre, shape_px
     # ---- is it one fruit, well seen?
-    f = intrinsics.focal_px
-    if fit.keep.sum() < cfg.min_boundary_points:
-        return NoDetection(f"only {int(fit.keep.sum())} silhouette points left after trimming occluder edges")
-    # the outline seen: the points kept, and those a fruit that is not a sphere keeps
-    # inside the circle through its widest parts (its outline is an ellipse)
-    on_outline = fit.keep | ((fit.resid_px > 0.0) & (fit.resid_px < cfg.outlier_px + 0.5 * shape_px))
-    arc = _arc_deg(uv[on_outline], fit.centre)
+    if keep.sum() < cfg.min_boundary_points:
+        return NoDetection(f"only {int(keep.sum())} silhouette points left after trimming occluder edges")
+    # the outline seen: the points kept, and (circle fit) those a fruit that is not a sphere
+    # keeps inside the circle through its widest parts (its outline is an ellipse)
+    on_outline = keep | ((resid_px > 0.0) & (resid_px < cfg.outlier_px + 0.5 * slack_px))
+    arc = _arc_deg(uv[on_outline], centre)
     if arc < cfg.min_arc_deg:
         return NoDetection(f"only {arc:.0f} deg of the target's outline visible (< {cfg.min_arc_deg:.0f})")
-    rms = float(np.sqrt(np.mean(fit.resid_px[fit.keep] ** 2)))
+    rms = float(np.sqrt(np.mean(resid_px[keep] ** 2)))
     if rms > cfg.max_fit_rms_px:
         return NoDetection(f"merged blob or not a fruit: its outline fits a circle to {rms:.2f} px rms")
-    outside = float(np.mean(fit.resid_px < -cfg.outlier_px))
+    outside = float(np.mean(resid_px < -cfg.outlier_px))
     if outside > cfg.max_outside_share:
         return NoDetection(
             f"merged blob: {100 * outside:.0f}% of the target's outline lies outside its fitted circle"
         )
-    radius_px = f * math.tan(fit.alpha)
+    radius_px = f * math.tan(alpha)
     if radius_px < cfg.min_radius_px:
         return NoDetection(f"a speck of colour, not a fruit: apparent radius {radius_px:.1f} px")
-    lat_fit, alpha_fit = _fit_sigmas(fit, uv, f)
-    if lat_fit * f > cfg.max_fit_sigma_px + 0.25 * shape_px:
+    if sph is not None:
+        var = max(float(np.mean((resid_px[keep] / f) ** 2)), (0.5 / f) ** 2)
+        sectors = _arc_deg(uv[keep], centre) / 10.0
+        lat_fit, alpha_fit = sph.sigmas(
+            var, max(sectors, 1.0) / len(sph.jac_rad), max(fruit.shape_spread_rel, 0.05)
+        )
+    else:
+        lat_fit, alpha_fit = _fit_sigmas(fit, uv, f)
+    if lat_fit * f > cfg.max_fit_sigma_px + 0.25 * slack_px:
         return NoDetection(
             f"the visible arcs fix the target's centre only to {lat_fit * f:.1f} px (1 sigma): too little "
             "of its outline, or a ragged one"
@@ -416,7 +618,8 @@ def detect(
                 f"apparent radius {radius_px:.1f} px is implausible for the predicted range "
                 f"(expected {expected_radius_px:.1f} px): a fragment, a merged blob or another fruit"
             )
-    axis, alpha = fit.axis, fit.alpha
+    # the shape no longer biases the size when the spheroid measured it: only the radius does
+    size_spread = fruit.size_spread_rel if sph is None else fruit.radius_spread_rel / math.sqrt(3.0)
     outline_points = sum(len(near[k].outline) for k in chosen.blobs)
     rho = fruit.radius_m / math.sin(alpha)
     # covariance: lateral from the centre pixel error; range from the unknown true radius
@@ -424,20 +627,17 @@ def detect(
     # each with the fit's own uncertainty (a short arc) added in quadrature
     sigma_lat = rho * math.hypot(measurement.centre_sigma_px / f, lat_fit)
     sigma_alpha = math.hypot(measurement.radius_sigma_px / f, alpha_fit)
-    sigma_rho = rho * math.hypot(fruit.size_spread_rel, sigma_alpha / math.tan(alpha))
-    e1 = np.cross(axis, [0.0, 0.0, 1.0])
-    e1 = e1 / np.linalg.norm(e1) if np.linalg.norm(e1) > 1e-9 else np.array([0.0, 1.0, 0.0])
-    U = np.column_stack((axis, e1, np.cross(axis, e1)))
-    cov = U @ np.diag([sigma_rho**2, sigma_lat**2, sigma_lat**2]) @ U.T
+    sigma_rho = rho * math.hypot(size_spread, sigma_alpha / math.tan(alpha))
+    cov = _along_across(axis, sigma_rho, sigma_lat)
     return Detection(
-        centre_px=fit.centre,
+        centre_px=centre,
         radius_px=radius_px,
         bearing_camera=axis,
         angular_radius_rad=alpha,
         range_m=rho,
         p_camera=rho * axis,
-        cov_camera=0.5 * (cov + cov.T),
-        area_px=_area_inside(mask, fit.centre, radius_px),
-        boundary_points=int(fit.keep.sum()),
-        trimmed_fraction=1.0 - float(fit.keep.sum()) / max(outline_points, 1),
+        cov_camera=cov,
+        area_px=_area_inside(mask, centre, radius_px),
+        boundary_points=int(keep.sum()),
+        trimmed_fraction=1.0 - float(keep.sum()) / max(outline_points, 1),
     )

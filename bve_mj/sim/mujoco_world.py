@@ -17,8 +17,9 @@ import mujoco
 import numpy as np
 
 from bve_mj.config import FruitPrior, MeasurementConfig, Settings
+from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import CameraModel, RangeModel
-from bve_mj.perception.detector import Detection, NoDetection, detect
+from bve_mj.perception.detector import Detection, NoDetection, Prediction, detect
 from bve_mj.planning.plan import ViewPlan
 from bve_mj.robot.ik import look_at_ik
 from bve_mj.robot.kinematics import ArmKinematics
@@ -184,16 +185,23 @@ class MujocoWorld:
         timings.ik_s = t1 - t0
         timings.control_s = time.perf_counter() - t1 - timings.record_s
 
-    def observe(self) -> Observation | None:
+    def observe(self, belief: Belief | None = None) -> Observation | None:
         t0 = time.perf_counter()
         image = noisy_image(self.renderer.render(self.data, CAMERA_NAME), self.settings.sensor, self._rng)
         t1 = time.perf_counter()
         q_enc, p, R = self._measured_pose()
         self.last.q, self.last.q_encoders = self.q, q_enc
-        ahead = R.T @ (self._target - p)
-        predicted = self.intrinsics.project(ahead) if ahead[0] > 1e-3 else None
         s = self.settings
-        det = detect(image, self.intrinsics, self.fruit_prior, self.measurement, s.detector, predicted)
+        if belief is not None:  # the estimate picks its fruit among those in view, in 3-D
+            prediction = Prediction(R.T @ (belief.mean - p), R.T @ belief.cov @ R)
+            det = detect(
+                image, self.intrinsics, self.fruit_prior, self.measurement, s.detector,
+                prediction=prediction, up_camera=R.T[:, 2],
+            )  # fmt: skip
+        else:
+            ahead = R.T @ (self._target - p)
+            predicted = self.intrinsics.project(ahead) if ahead[0] > 1e-3 else None
+            det = detect(image, self.intrinsics, self.fruit_prior, self.measurement, s.detector, predicted)
         self.last.detection = det
         self.last.timings.render_s = t1 - t0
         self.last.timings.detect_s = time.perf_counter() - t1
@@ -232,6 +240,8 @@ class MujocoWorld:
             }
         elif isinstance(det, NoDetection):
             out["detection"] = {"none": det.reason}
+            if det.ambiguous:
+                out["events"] = ["ambiguous"]
         return out
 
     def close(self) -> None:

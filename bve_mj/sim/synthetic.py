@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from bve_mj.config import Settings
+from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import CameraModel, RangeModel
 from bve_mj.geometry import camera_rotation
 from bve_mj.planning.plan import ViewPlan
@@ -43,7 +44,7 @@ class SyntheticWorld:
         self._c = np.asarray(plan.p_world_camera, dtype=float).copy()
         self._target = np.asarray(plan.p_world_target, dtype=float).copy()
 
-    def observe(self) -> Observation | None:
+    def observe(self, belief: Belief | None = None) -> Observation | None:  # one fruit: no choice
         if self._settings.measurement.kind in ("range", "auto"):  # auto: range here
             var = float(self._sigma_c[0, 0])
             z = np.linalg.norm(self._truth - self._c) + self._rng.standard_normal() * np.sqrt(var)

@@ -7,6 +7,7 @@ from typing import Protocol
 
 import numpy as np
 
+from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import MeasurementModel
 from bve_mj.planning.plan import ViewPlan
 
@@ -48,6 +49,9 @@ class World(Protocol):
         """Drive the camera to the plan's viewpoint, looking at its target."""
         ...
 
-    def observe(self) -> Observation | None:
-        """Measure the fruit from the current pose; None when nothing is detected."""
+    def observe(self, belief: Belief | None = None) -> Observation | None:
+        """Measure the fruit from the current pose; None when nothing is detected.
+
+        ``belief``: the filter's prediction for this view (a world that sees several fruit
+        uses it to tell which one is the target)."""
         ...

@@ -1,0 +1,121 @@
+"""The silhouette of a spheroid fruit: the cone of rays that graze it, fitted to outline rays.
+
+A tomato is not a sphere: a round one is 5-15% flatter than it is wide, a beefsteak 20-30%,
+a plum 20-40% taller. Its silhouette is then not a circle but (nearly) an ellipse, and a
+circle fitted through its widest parts with the rest trimmed as "occluded" has its centre
+off by the difference of the semi-axes (a 28 mm fruit of shape index 0.9: ~3 mm, always the
+same way). The fruit hangs with its axis near the vertical (tilted by a few degrees), so the
+axis is known in the camera frame, and a spheroid with that axis is fitted instead.
+
+Model, in the camera frame, lengths in units of the equatorial radius a: centre p, axis u
+(unit), shape index k = polar / equatorial semi-axis; the surface is (x - p)ᵀ A (x - p) = 1
+with A = I + (1/k² - 1) u uᵀ. A ray b from the camera grazes it when the quadratic
+t² bᵀAb - 2t bᵀAp + pᵀAp - 1 has a double root:
+
+    g(b) = (bᵀAp)² - (bᵀAb)(pᵀAp - 1) = 0,  g > 0 for rays that hit it.
+
+The residual of a boundary ray is the Sampson distance g / |∇⊥g| (an angle; positive inside
+the silhouette), which is the angular distance to the silhouette to first order. Scale is
+not observable (p, a → λp, λa give the same cone): the fit gives the bearing p/|p|, the
+equatorial angular radius asin(1/|p|) and k; the range comes from the radius the estimator
+assumes for a, as for a sphere.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+__all__ = ["SpheroidFit", "fit_spheroid", "grazing_residuals"]
+
+
+@dataclass(frozen=True)
+class SpheroidFit:
+    """A fitted spheroid silhouette.
+
+    Attributes:
+        axis: unit bearing of the centre in the camera frame, (3,).
+        alpha: equatorial angular radius asin(a / ρ) [rad].
+        shape_index: k, polar / equatorial semi-axis.
+        resid_rad: inside-positive angular residuals of every ray given, (N,).
+        p: the centre in units of the equatorial radius, (3,).
+        jac_rad: d(residual)/d(p, ln k) of the rays fitted [rad], (M, 4).
+    """
+
+    axis: np.ndarray
+    alpha: float
+    shape_index: float
+    resid_rad: np.ndarray
+    p: np.ndarray
+    jac_rad: np.ndarray
+
+    def sigmas(self, point_var_rad2: float, weight: float, shape_sigma_log: float) -> tuple[float, float]:
+        """1σ of the bearing (across it, the worse direction) and of α [rad] when each fitted
+        ray's residual has variance ``point_var_rad2`` and counts ``weight`` (correlated
+        points count less than one each); the shape prior adds its information."""
+        info = weight * self.jac_rad.T @ self.jac_rad / point_var_rad2
+        info[3, 3] += 1.0 / max(shape_sigma_log, 1e-3) ** 2
+        try:
+            C = np.linalg.inv(info)[:3, :3]
+        except np.linalg.LinAlgError:
+            return math.inf, math.inf
+        n = float(np.linalg.norm(self.p))
+        a = self.p / n
+        P = (np.eye(3) - np.outer(a, a)) / n  # d(axis)/dp
+        g = -a / (n * n * math.sqrt(1.0 - 1.0 / (n * n)))  # dα/dp, α = asin(1/|p|)
+        lateral = np.linalg.eigvalsh(P @ C @ P.T)
+        return math.sqrt(max(float(lateral[-1]), 0.0)), math.sqrt(max(float(g @ C @ g), 0.0))
+
+
+def grazing_residuals(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """Angular distance [rad] of unit ``rays`` (N, 3) from the silhouette of the spheroid
+    centred at ``p`` (equatorial radius 1) with axis ``up`` and ``shape_index``; positive
+    inside the silhouette."""
+    A = np.eye(3) + (1.0 / shape_index**2 - 1.0) * np.outer(up, up)
+    Ap = A @ p
+    c = float(p @ Ap) - 1.0
+    bAp = rays @ Ap
+    Ab = rays @ A  # A symmetric
+    bAb = np.einsum("ij,ij->i", rays, Ab)
+    g = bAp**2 - bAb * c
+    grad = 2.0 * (bAp[:, None] * Ap[None, :] - c * Ab)
+    grad -= np.einsum("ij,ij->i", grad, rays)[:, None] * rays  # across the ray only
+    return g / np.maximum(np.linalg.norm(grad, axis=1), 1e-12)
+
+
+def fit_spheroid(
+    rays: np.ndarray,
+    up: np.ndarray,
+    axis0: np.ndarray,
+    alpha0: float,
+    shape_index0: float,
+    shape_sigma_log: float,
+    scale_rad: float,
+) -> SpheroidFit | None:
+    """Least-squares spheroid silhouette through ``rays`` (N, 3), starting from the sphere
+    (``axis0``, ``alpha0``) with the prior shape index; a robust loss (soft L1 at
+    ``scale_rad``, about a pixel) lets a few stray points pass, and the log shape index is
+    held to its prior with σ ``shape_sigma_log`` (a view along the axis cannot see it).
+    None when the fit fails or ends at an absurd shape (k outside [0.4, 2.5])."""
+    up = np.asarray(up, dtype=float) / float(np.linalg.norm(up))
+    x0 = np.concatenate([np.asarray(axis0, dtype=float) / math.sin(alpha0), [math.log(shape_index0)]])
+    prior_w = 1.0 / max(shape_sigma_log, 1e-3)
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        r = grazing_residuals(x[:3], math.exp(x[3]), up, rays) / scale_rad
+        return np.append(r, prior_w * (x[3] - math.log(shape_index0)))
+
+    try:
+        sol = least_squares(residuals, x0, loss="soft_l1", f_scale=1.0, x_scale="jac", max_nfev=60)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    p, k = sol.x[:3], math.exp(float(sol.x[3]))
+    n = float(np.linalg.norm(p))
+    if not (np.all(np.isfinite(sol.x)) and n > 1.0 and 0.4 <= k <= 2.5 and p[0] > 0.0):
+        return None
+    return SpheroidFit(
+        p / n, math.asin(1.0 / n), k, grazing_residuals(p, k, up, rays), p.copy(), sol.jac[:-1] * scale_rad
+    )
