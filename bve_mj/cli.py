@@ -113,7 +113,8 @@ def _build_parser() -> argparse.ArgumentParser:
     ep.add_argument(
         "--initial-error",
         default=None,
-        help="prior error half-width e [m]: along the ray (episode.prior = detection) or per axis (cube); default 0.05",
+        help="prior error half-width e [m]: along the ray (episode.prior = detection) or per axis "
+        "(cube); default 0.05",
     )
 
     for name, helptext, desc in (
