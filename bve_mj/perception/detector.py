@@ -17,8 +17,8 @@ grouped into fruit, one circle each (:mod:`bve_mj.perception.instances`); the ta
 the fruit the estimate means (given its mean and covariance: least 3-D Mahalanobis distance,
 and "ambiguous" when another is about as likely; else the circle nearest the predicted
 projection), and only its own outer arcs are fitted: where it meets a neighbour there is no
-outline (red on red) and the blended points at the junction are left out, and the arcs of its fragments are fitted together (those on
-their common convex hull). The fit is then checked: enough of the outline seen, a circle
+outline (red on red) and the blended points at the junction are left out, and the arcs of
+its fragments are fitted together (those on their common convex hull). The fit is then checked: enough of the outline seen, a circle
 that fits it, none of its points well outside, a centre the arcs pin down, a radius no
 speck has, and (when the caller knows the predicted range) an apparent size the prior
 allows. A target that fails says why, in a :class:`NoDetection`: a merged blob is never
