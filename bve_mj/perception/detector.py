@@ -13,15 +13,16 @@ fit repeated. Range is exact: ρ = r / sin α, r the radius the estimator assume
 Touching fruit: the tomatoes of a truss touch, so a ripe blob is usually several fruit, and
 a fruit of uneven colour (or with a stem across it) several blobs. The outlines of the blob
 the prediction falls on and of the blobs around it are cut into arcs at their corners and
-grouped into fruit, one circle each (:mod:`bve_mj.perception.instances`); the target is
-the fruit the estimate means (given its mean and covariance: least 3-D Mahalanobis distance,
-and "ambiguous" when another is about as likely; else the circle nearest the predicted
+grouped into fruit, one circle each (:mod:`bve_mj.perception.instances`); the target is the
+fruit the estimate means (given its mean and covariance: least 3-D Mahalanobis distance, and
+"ambiguous" when another is about as likely; else the circle nearest the predicted
 projection), and only its own outer arcs are fitted: where it meets a neighbour there is no
 outline (red on red) and the blended points at the junction are left out, and the arcs of
-its fragments are fitted together (those on their common convex hull). The fit is then checked: enough of the outline seen, a circle
-that fits it, none of its points well outside, a centre the arcs pin down, a radius no
-speck has, and (when the caller knows the predicted range) an apparent size the prior
-allows. A target that fails says why, in a :class:`NoDetection`: a merged blob is never
+its fragments are fitted together (those on their common convex hull). The fit is then
+checked: enough of the outline seen, a circle that fits it, none of its points well outside,
+a centre the arcs pin down, a radius no speck has, and (when the caller knows the predicted
+range) an apparent size the prior allows.
+A target that fails says why, in a :class:`NoDetection`: a merged blob is never
 measured as one fruit. Where the caller gives the world's vertical, the cone is refined into
 a spheroid with that axis (:mod:`bve_mj.perception.spheroid`): a tomato is flatter or taller
 than wide, and a circle through its equator misplaces its centre. What passes has a
