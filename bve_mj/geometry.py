@@ -19,6 +19,7 @@ __all__ = [
     "look_at_pose",
     "pixel_rays",
     "project_point",
+    "ray_frame",
     "skew",
 ]
 
@@ -127,3 +128,13 @@ def pixel_rays(uv: np.ndarray, focal_px: float, width_px: int, height_px: int) -
     rays[:, 1] = 0.5 * width_px - uv[:, 0]
     rays[:, 2] = 0.5 * height_px - uv[:, 1]
     return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
+
+def ray_frame(axis: np.ndarray) -> np.ndarray:
+    """Orthonormal columns (axis, across, up-across) for a unit ``axis``: the first across
+    direction is horizontal (axis × z; y where the axis is vertical). Covariances laid along a
+    line of sight and across it are built in it."""
+    e1 = np.cross(axis, [0.0, 0.0, 1.0])
+    n = float(np.linalg.norm(e1))
+    e1 = e1 / n if n > 1e-9 else np.array([0.0, 1.0, 0.0])
+    return np.column_stack((axis, e1, np.cross(axis, e1)))

@@ -20,6 +20,7 @@ from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
 from bve_mj.experiments import EXPERIMENTS, with_overrides
 from bve_mj.faults import FaultyPlanner, FaultyWorld
+from bve_mj.geometry import ray_frame
 from bve_mj.planning.constraints import ConstraintName
 from bve_mj.planning.plan import Planner
 from bve_mj.robot import ArmKinematics, IkOptions, arm_kinematics, look_at_ik, make_arm_planner
@@ -175,10 +176,7 @@ def detection_prior(
     truss, does not."""
     ray = truth - p_world_camera
     rho = float(np.linalg.norm(ray))
-    d = ray / rho
-    e1 = np.cross(d, [0.0, 0.0, 1.0])
-    e1 = e1 / np.linalg.norm(e1) if np.linalg.norm(e1) > 1e-9 else np.array([0.0, 1.0, 0.0])
-    U = np.column_stack((d, e1, np.cross(d, e1)))
+    U = ray_frame(ray / rho)
     e, lat = ep.initial_error_m, ep.initial_lateral_error_m
     offset = rng.uniform(-1.0, 1.0, 3) * np.array([e, lat, lat])
     sigmas = np.maximum(np.array([e, lat, lat]) / math.sqrt(3.0), 1e-3)

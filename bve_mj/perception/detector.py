@@ -40,7 +40,7 @@ import cv2
 import numpy as np
 
 from bve_mj.config import CameraConfig, DetectorConfig, FruitPrior, MeasurementConfig
-from bve_mj.geometry import pixel_rays, project_point
+from bve_mj.geometry import pixel_rays, project_point, ray_frame
 from bve_mj.perception.instances import Arc, Circle, FruitOutline, group_arcs, hull_points, outline_arcs
 from bve_mj.perception.spheroid import SpheroidFit, fit_spheroid, grazing_residuals
 
@@ -385,9 +385,7 @@ def _rough_measurement(
 
 def _along_across(axis: np.ndarray, sigma_along: float, sigma_across: float) -> np.ndarray:
     """Covariance with σ ``sigma_along`` along the unit ``axis`` and ``sigma_across`` across."""
-    e1 = np.cross(axis, [0.0, 0.0, 1.0])
-    e1 = e1 / np.linalg.norm(e1) if np.linalg.norm(e1) > 1e-9 else np.array([0.0, 1.0, 0.0])
-    U = np.column_stack((axis, e1, np.cross(axis, e1)))
+    U = ray_frame(axis)
     cov = U @ np.diag([sigma_along**2, sigma_across**2, sigma_across**2]) @ U.T
     return 0.5 * (cov + cov.T)
 
