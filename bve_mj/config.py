@@ -399,6 +399,14 @@ class PlannerConfig:
             "limits (0 = none: the arm then folds against its limits and approaches stall)"
         ),
     )
+    failed_view_width_deg: float = field(
+        default=25.0,
+        metadata=_why(
+            "theta0: the BVE discounts views within about this angle of a view that measured "
+            "nothing (seen from the estimate): the target is hidden from there (0 = off, the paper)",
+            "deg",
+        ),
+    )
     max_iterations: int = field(default=100, metadata=_why("optimiser iteration cap"))
     feasibility_tol: float = field(
         default=1e-7, metadata=_why("largest constraint value accepted as feasible", "m or m^2")
@@ -414,6 +422,10 @@ class PlannerConfig:
         _non_negative("planner", "max_eigenvalue_trace_weight", self.max_eigenvalue_trace_weight)
         _non_negative("planner", "joint_margin_weight", self.joint_margin_weight)
         _positive_int("planner", "starts", self.starts)
+        if not 0.0 <= _number("planner", "failed_view_width_deg", self.failed_view_width_deg) <= 90.0:
+            raise ConfigError(
+                "planner.failed_view_width_deg", self.failed_view_width_deg, "a number in [0, 90]"
+            )
         _positive_int("planner", "max_iterations", self.max_iterations)
         _positive("planner", "feasibility_tol", self.feasibility_tol)
 
@@ -985,10 +997,14 @@ class EpisodeConfig:
         default=0.05,
         metadata=_why("e: the prior's range error (detection) or error per axis (cube)", "m"),
     )
-    initial_lateral_error_m: float = field(
-        default=0.01,
+    initial_lateral_error_m: float | None = field(
+        default=None,
         metadata=_why(
-            "l: the detection prior's error across the ray, each way (a first detection's bearing)", "m"
+            "l: the detection prior's error across the ray, each way (a first detection's bearing). "
+            "Unset: a third of the fruit type's mean radius (the first detection's ray passes "
+            "through the fruit it picked, near its centre; a bearing error as wide as a cherry "
+            "would not say which cherry is meant)",
+            "m",
         ),
     )
     stop_sigma_m: float = field(
@@ -1034,7 +1050,8 @@ class EpisodeConfig:
         for f in ("band_distance_m", "band_tolerance_m", "step_m", "stop_sigma_m", "approach_distance_m"):
             _positive("episode", f, getattr(self, f))
         _non_negative("episode", "initial_error_m", self.initial_error_m)
-        _non_negative("episode", "initial_lateral_error_m", self.initial_lateral_error_m)
+        if self.initial_lateral_error_m is not None:
+            _non_negative("episode", "initial_lateral_error_m", self.initial_lateral_error_m)
         if self.prior not in ("detection", "cube"):
             raise ConfigError("episode.prior", self.prior, "detection or cube")
         _non_negative("episode", "stop_stable_m", self.stop_stable_m)
@@ -1049,6 +1066,12 @@ class EpisodeConfig:
         }:
             raise ConfigError("episode.experiment", self.experiment, "one of E1..E10")
         _open_interval("episode", "gate_probability", self.gate_probability, 0.0, 1.0, "a number in (0, 1)")
+
+    def lateral_error_m(self, fruit_radius_m: float) -> float:
+        """l: ``initial_lateral_error_m``, or a third of ``fruit_radius_m`` when unset."""
+        if self.initial_lateral_error_m is not None:
+            return float(self.initial_lateral_error_m)
+        return fruit_radius_m / 3.0
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -14,7 +14,7 @@ from bve_mj.config import FilterConfig
 from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.ekf import predict, update
-from bve_mj.planning.plan import Planner, PlanStatus, ViewPlan
+from bve_mj.planning.plan import LearnsFromFailedViews, Planner, PlanStatus, ViewPlan
 from bve_mj.sim.world import Observation, World
 
 __all__ = ["EpisodeResult", "StopRules", "ViewRecord", "run_episode", "supported"]
@@ -156,6 +156,7 @@ def run_episode(
 
     def fuse(i: int, status: PlanStatus | None, feasible: bool, plan_s: float, events: list[str]) -> None:
         nonlocal belief
+        looked_at = belief.mean
         obs = world.observe(belief)
         measured, accepted, nis = obs is not None, False, float("nan")
         if obs is not None:
@@ -186,6 +187,8 @@ def run_episode(
                 tuple(events),
             )
         )  # fmt: skip
+        if not accepted and isinstance(planner, LearnsFromFailedViews):
+            planner.note_failed_view(world.p_world_camera, looked_at)
         q = getattr(world, "q_measured", None)
         if sync is not None and q is not None:
             sync(q)

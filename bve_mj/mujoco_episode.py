@@ -166,18 +166,22 @@ def _start_configuration(
 
 
 def detection_prior(
-    p_world_camera: np.ndarray, truth: np.ndarray, ep: EpisodeConfig, rng: np.random.Generator
+    p_world_camera: np.ndarray,
+    truth: np.ndarray,
+    ep: EpisodeConfig,
+    rng: np.random.Generator,
+    fruit_radius_m: float,
 ) -> Belief:
     """The prior a first detection of the target from ``p_world_camera`` gives: on the ray to
     the fruit, its range off by U[-e, e] (e = ``initial_error_m``; apparent size is a coarse
     range cue) and its bearing by U[-l, l] in each direction across the ray
-    (l = ``initial_lateral_error_m``); covariance with those uniforms' σ along and across the
-    ray (at least 1 mm). It says which fruit is meant, where a cube around the fruit, in a
-    truss, does not."""
+    (l = :meth:`EpisodeConfig.lateral_error_m` of the assumed ``fruit_radius_m``); covariance
+    with those uniforms' σ along and across the ray (at least 1 mm). It says which fruit is
+    meant, where a cube around the fruit, in a truss, does not."""
     ray = truth - p_world_camera
     rho = float(np.linalg.norm(ray))
     U = ray_frame(ray / rho)
-    e, lat = ep.initial_error_m, ep.initial_lateral_error_m
+    e, lat = ep.initial_error_m, ep.lateral_error_m(fruit_radius_m)
     offset = rng.uniform(-1.0, 1.0, 3) * np.array([e, lat, lat])
     sigmas = np.maximum(np.array([e, lat, lat]) / math.sqrt(3.0), 1e-3)
     return Belief(truth + U @ offset, U @ np.diag(sigmas**2) @ U.T)
@@ -218,7 +222,11 @@ def run_mujoco_episode(
         q_start = _start_configuration(kin, coarse, ep.band_distance_m, prior_rng)
     except PlanningError:  # the fruit is out of the arm's reach: a clear outcome, not a crash
         return MujocoEpisode(EpisodeResult(cube, (), 0.0, "unreachable"), info, s, seed, kin.home.copy())
-    prior = cube if ep.prior == "cube" else detection_prior(kin.camera_pose(q_start)[0], truth, ep, prior_rng)
+    if ep.prior == "cube":
+        prior = cube
+    else:
+        p_camera = kin.camera_pose(q_start)[0]
+        prior = detection_prior(p_camera, truth, ep, prior_rng, s.fruit.radius_m)
     mean = prior.mean
     world = MujocoWorld(
         s, kin, model, info, q_start, mean, np.random.default_rng(sensor_ss),

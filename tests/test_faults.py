@@ -259,3 +259,27 @@ def test_a_second_red_blob_in_the_rendered_scene_does_not_capture_the_estimate(k
         ep = run_mujoco_episode(settings, seed, target=target, distractors=others, edit=edit, recorder=rec)
         assert max(rec.counts) >= 2, rec.counts
         assert ep.final_error_mm < 10.0, (kind, seed, ep.final_error_mm, ep.result.outcome)
+
+
+def test_the_loop_tells_the_planner_of_every_view_that_measured_nothing() -> None:
+    """Views dropped (nothing measured) are reported to a planner that learns from them,
+    with the camera position and the estimate it looked at; measured views are not."""
+    s = dataclasses.replace(GATED, faults=FaultConfig(drop_p=0.5))
+    rng = np.random.default_rng(3)
+    scenario = sample_scenario(s.protocol, rng)
+    world = FaultyWorld(SyntheticWorld(s, scenario, rng), s.faults, rng)
+    inner = make_planner(s, "dispersion", ("band",), rng)
+    told: list[tuple[np.ndarray, np.ndarray]] = []
+
+    class Spy:
+        def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int):  # type: ignore[no-untyped-def]
+            return inner.plan(belief, p_world_camera, iteration)
+
+        def note_failed_view(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+            told.append((p_world_camera.copy(), p_world_target.copy()))
+
+    result = run_episode(world, Spy(), Belief.isotropic(scenario.initial_estimate, 0.1), s.filter, 8)
+    failed = [v for v in result.views if not v.accepted]
+    assert failed and len(told) == len(failed)
+    for v, (camera, _) in zip(failed, told, strict=True):
+        np.testing.assert_allclose(camera, v.p_world_camera)

@@ -227,3 +227,41 @@ def test_scene_config_validates():
         SceneConfig(fruit_radius_m=(0.05, 0.02))
     with pytest.raises(ConfigError, match=r"scene\.target_x_m"):
         SceneConfig(target_x_m=(0.4, 0.6))
+
+
+def _cone_rays(axis, alpha, phis):
+    """Unit rays at angle ``alpha`` around unit ``axis``, at azimuths ``phis`` [rad]."""
+    u = np.cross(axis, [0.0, 0.0, 1.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    return np.array(
+        [math.cos(alpha) * axis + math.sin(alpha) * (math.cos(p) * u + math.sin(p) * v) for p in phis]
+    )
+
+
+def test_the_arc_jackknife_flags_an_arc_that_is_not_the_fruits():
+    """Two arcs of one cone agree: no spread. An arc of a neighbouring cone (0.01 rad off)
+    grouped with the fruit's own: the fits without each arc disagree by about that much."""
+    from bve_mj.perception.detector import _arc_jackknife, _fit_cone
+
+    axis = np.array([1.0, 0.1, -0.05])
+    axis /= np.linalg.norm(axis)
+    other = axis + np.array([0.0, 0.01, 0.0])
+    other /= np.linalg.norm(other)
+    alpha = 0.15
+    own = _cone_rays(axis, alpha, np.radians(np.arange(0, 140, 4)))
+    for second, expect_off in ((axis, False), (other, True)):
+        rays = np.vstack([own, _cone_rays(second, alpha, np.radians(np.arange(190, 290, 4)))])
+        arc_of = np.repeat([0, 1], [35, 25])
+        keep = np.ones(len(rays), dtype=bool)
+        fit_axis, cos_a = _fit_cone(rays)
+        lat, d_alpha = _arc_jackknife(rays, keep, arc_of, fit_axis, math.acos(cos_a), 12)
+        if expect_off:
+            assert 0.002 < lat < 0.03
+        else:
+            assert lat < 1e-9 and d_alpha < 1e-9
+        # one arc alone: nothing to compare
+        assert _arc_jackknife(rays, keep, np.zeros(len(rays), int), fit_axis, math.acos(cos_a), 12) == (
+            0.0,
+            0.0,
+        )

@@ -126,3 +126,30 @@ def test_consistent_range_planner_looks_along_the_largest_uncertainty():
     assert plan.feasible
     assert abs(e_new[1]) > 0.15  # turned towards the y axis (a 0.2 m step at 1 m: ≤ 0.2)
     assert abs(e_new[1]) > 5 * abs(e_new[2])
+
+
+def _angle_deg(a, b):
+    return np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1.0, 1.0)))
+
+
+def test_bve_stops_proposing_a_view_that_measured_nothing():
+    """A view that failed (the target hidden from there) is worth little afterwards: the BVE
+    plans elsewhere, while with the discount off it returns to the same view."""
+    settings = Settings()
+    k = np.array([0.6, 0.0, 0.3])
+    camera = k + np.array([-settings.constraints.band_distance_m, 0.0, 0.0])
+    belief = Belief(k, np.diag([0.03**2, 0.004**2, 0.004**2]))  # long along the ray seen
+    first = BvePlanner(settings, "dispersion", ("band",)).plan(belief, camera, 1)
+    failed_dir = first.p_world_camera - k
+    assert _angle_deg(failed_dir, camera - k) > 10.0  # it moved off the measured ray
+
+    for width, far in ((25.0, True), (0.0, False)):
+        s = dataclasses.replace(
+            settings, planner=dataclasses.replace(settings.planner, failed_view_width_deg=width)
+        )
+        planner = BvePlanner(s, "dispersion", ("band",))
+        planner.note_failed_view(first.p_world_camera, k)
+        again = planner.plan(belief, camera, 2)
+        assert again.feasible
+        moved = _angle_deg(again.p_world_camera - k, failed_dir)
+        assert (moved > 10.0) == far, moved

@@ -10,6 +10,7 @@ from bve_mj.planning import (
     CameraInformation,
     DispersionLoss,
     DistanceBand,
+    FailedViewDiscount,
     FieldOfViewCone,
     MaxEigenvalueLoss,
     OutsideFruit,
@@ -40,6 +41,12 @@ INFOS = {
     "camera": CameraInformation(SIGMA_C),
     "camera_anisotropic": CameraInformation(SIGMA_C_ANISO),
     "range": RangeInformation(0.092**2),
+    # views from three directions measured nothing: p(c)·Λn(c)
+    "camera_failed_views": FailedViewDiscount(
+        CameraInformation(SIGMA_C),
+        np.array([[1.0, 0.0, 0.0], [0.0, 0.6, 0.8], [-0.6, 0.0, -0.8]]),
+        math.radians(25.0),
+    ),
 }
 
 

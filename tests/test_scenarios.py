@@ -87,6 +87,8 @@ def test_a_file_measurement_survives(tmp_path):
         ('[episode]\nprior = "somewhere"\n', "episode.prior"),
         ("[episode]\ninitial_lateral_error_m = -0.01\n", "episode.initial_lateral_error_m"),
         ("[detector]\nambiguity_ratio = 0.5\n", "detector.ambiguity_ratio"),
+        ('[planner]\nfailed_view_width_deg = "wide"\n', "planner.failed_view_width_deg"),
+        ("[planner]\nfailed_view_width_deg = 120\n", "planner.failed_view_width_deg"),
         ("[fruit]\nshape_index = 4.0\n", "fruit.shape_index"),
     ],
 )
@@ -126,7 +128,7 @@ def test_the_detection_prior_lies_on_the_ray_and_says_so():
     rng = np.random.default_rng(0)
     along = []
     for _ in range(200):
-        prior = detection_prior(camera, truth, ep, rng)
+        prior = detection_prior(camera, truth, ep, rng, fruit_radius_m=0.028)
         d = prior.mean - truth
         along.append(d @ ray)
         assert (
@@ -136,6 +138,19 @@ def test_the_detection_prior_lies_on_the_ray_and_says_so():
         assert sig == pytest.approx([0.01 / np.sqrt(3), 0.01 / np.sqrt(3), 0.05 / np.sqrt(3)])
         assert ray @ prior.cov @ ray == pytest.approx((0.05 / np.sqrt(3)) ** 2)
     assert np.std(along) == pytest.approx(0.05 / np.sqrt(3), rel=0.15)  # uniform over [-e, e]
+
+
+def test_the_detection_priors_bearing_error_scales_with_the_fruit_unless_set():
+    """Unset, the bearing error is a third of the fruit type's radius (a cherry's prior must
+    say which cherry is meant); set, it is what was set."""
+    camera, truth = np.array([0.1, 0.0, 0.4]), np.array([0.42, 0.1, 0.3])
+    for radius, ep, lat in (
+        (0.0112, EpisodeConfig(), 0.0112 / 3),
+        (0.040, EpisodeConfig(), 0.040 / 3),
+        (0.0112, EpisodeConfig(initial_lateral_error_m=0.02), 0.02),
+    ):
+        prior = detection_prior(camera, truth, ep, np.random.default_rng(1), fruit_radius_m=radius)
+        assert np.sqrt(np.linalg.eigvalsh(prior.cov))[0] == pytest.approx(lat / np.sqrt(3))
 
 
 def test_a_truss_episode_localises_its_target_within_5_mm():

@@ -88,6 +88,7 @@ class Detection:
         cov_camera: its covariance [m²], (3, 3): range σ along the bearing, lateral σ across.
         area_px: blob area; boundary_points: silhouette points used in the fit;
         trimmed_fraction: share of boundary points rejected as occluder or image edges.
+        arc_deg: how much of the fruit's outline the fit saw (10° sectors around its centre).
     """
 
     centre_px: np.ndarray
@@ -100,6 +101,7 @@ class Detection:
     area_px: int
     boundary_points: int
     trimmed_fraction: float
+    arc_deg: float = 360.0
 
 
 @dataclass(frozen=True)
@@ -291,6 +293,32 @@ def _fit_sigmas(fit: _Fit, uv: np.ndarray, f: float) -> tuple[float, float]:
     P = (np.eye(3) - np.outer(fit.axis, fit.axis)) / nw  # da/dw
     lateral = np.linalg.eigvalsh(P @ cov_w @ P.T)
     return math.sqrt(max(float(lateral[-1]), 0.0)), sigma_alpha
+
+
+def _arc_jackknife(
+    rays: np.ndarray, keep: np.ndarray, arc_of: np.ndarray, axis: np.ndarray, alpha: float, min_points: int
+) -> tuple[float, float]:
+    """Jackknife over the outline's arcs: the cone refitted without each arc in turn (where
+    the rest still has ``min_points``), 1σ of the axis across it (the worse direction) and of
+    α [rad] from the replicates' deviations from the full fit (``axis``, ``alpha``), scaled
+    by (n - 1)/n for n arcs. Zero for a single arc (nothing to compare)."""
+    labels = np.unique(arc_of[keep])
+    n = len(labels)
+    if n < 2:
+        return 0.0, 0.0
+    C, var_alpha = np.zeros((3, 3)), 0.0
+    for j in labels:
+        rest = keep & (arc_of != j)
+        if rest.sum() < min_points:
+            continue
+        a_j, cos_j = _fit_cone(rays[rest])
+        if not (0.0 < cos_j < 1.0) or a_j[0] <= 0.0:
+            continue
+        d = a_j - axis
+        C += np.outer(d, d)
+        var_alpha += (math.acos(cos_j) - alpha) ** 2
+    k = (n - 1) / n
+    return math.sqrt(k * float(np.linalg.eigvalsh(C)[-1])), math.sqrt(k * var_alpha)
 
 
 @dataclass(frozen=True)
@@ -553,7 +581,9 @@ def detect(
             "hidden by its neighbours or occluders"
         )
     uv = chosen.points
-    uv = uv[hull_points(uv)]
+    on_hull = hull_points(uv)
+    uv = uv[on_hull]
+    arc_of = np.concatenate([np.full(len(a.points), j) for j, a in enumerate(chosen.arcs)])[on_hull]
     if len(uv) < cfg.min_boundary_points:
         return NoDetection(f"only {len(uv)} silhouette points of the target apart from its neighbours")
     shape_px = shape * chosen.circle.radius
@@ -605,6 +635,10 @@ def detect(
         )
     else:
         lat_fit, alpha_fit = _fit_sigmas(fit, uv, f)
+    # arcs grouped into one fruit may not all be its own (a neighbour's arc that happens to
+    # lie near its circle) or may be off together (shading along one side): the spread of
+    # the fits that leave one arc out says how far the centre can be off
+    lat_jk, alpha_jk = _arc_jackknife(fit.rays, keep, arc_of, axis, alpha, cfg.min_boundary_points)
     if lat_fit * f > cfg.max_fit_sigma_px + 0.25 * slack_px:
         return NoDetection(
             f"the visible arcs fix the target's centre only to {lat_fit * f:.1f} px (1 sigma): too little "
@@ -623,9 +657,10 @@ def detect(
     rho = fruit.radius_m / math.sin(alpha)
     # covariance: lateral from the centre pixel error; range from the unknown true radius
     # (uniform ±spread) and the pixel error of the apparent radius, dρ/dα = -ρ / tan α;
-    # each with the fit's own uncertainty (a short arc) added in quadrature
-    sigma_lat = rho * math.hypot(measurement.centre_sigma_px / f, lat_fit)
-    sigma_alpha = math.hypot(measurement.radius_sigma_px / f, alpha_fit)
+    # each with the fit's own uncertainty (a short arc), or the arcs' jackknife spread where
+    # that is larger, added in quadrature
+    sigma_lat = rho * math.hypot(measurement.centre_sigma_px / f, max(lat_fit, lat_jk))
+    sigma_alpha = math.hypot(measurement.radius_sigma_px / f, max(alpha_fit, alpha_jk))
     sigma_rho = rho * math.hypot(size_spread, sigma_alpha / math.tan(alpha))
     cov = _along_across(axis, sigma_rho, sigma_lat)
     return Detection(
@@ -639,4 +674,5 @@ def detect(
         area_px=_area_inside(mask, centre, radius_px),
         boundary_points=int(keep.sum()),
         trimmed_fraction=1.0 - float(keep.sum()) / max(outline_points, 1),
+        arc_deg=arc,
     )

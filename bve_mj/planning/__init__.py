@@ -24,6 +24,7 @@ from bve_mj.planning.constraints import (
 )
 from bve_mj.planning.information import (
     CameraInformation,
+    FailedViewDiscount,
     ObservationInformation,
     RangeInformation,
     observation_information,
@@ -35,7 +36,7 @@ from bve_mj.planning.losses import (
     Objective,
     approach_activation,
 )
-from bve_mj.planning.plan import Planner, PlanStatus, ViewPlan
+from bve_mj.planning.plan import LearnsFromFailedViews, Planner, PlanStatus, ViewPlan
 
 __all__ = [
     "ApproachTerm",
@@ -47,7 +48,9 @@ __all__ = [
     "DispersionLoss",
     "DistanceBand",
     "ExtraConstraints",
+    "FailedViewDiscount",
     "FieldOfViewCone",
+    "LearnsFromFailedViews",
     "MaxEigenvalueLoss",
     "Objective",
     "ObservationInformation",

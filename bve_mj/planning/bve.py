@@ -16,6 +16,7 @@ optimiser started there alone never moves.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -33,7 +34,11 @@ from bve_mj.planning.constraints import (
     check_constraint_names,
     max_violation,
 )
-from bve_mj.planning.information import ObservationInformation, observation_information
+from bve_mj.planning.information import (
+    FailedViewDiscount,
+    ObservationInformation,
+    observation_information,
+)
 from bve_mj.planning.losses import (
     ApproachTerm,
     DispersionLoss,
@@ -70,6 +75,7 @@ class BvePlanner:
     extra_constraints: ExtraConstraints | None = None
     info: ObservationInformation = field(init=False)
     _views_precision: np.ndarray | None = field(init=False, default=None)
+    _failed: list[np.ndarray] = field(init=False, default_factory=list)
 
     def __post_init__(self) -> None:
         self.constraint_names = check_constraint_names(self.constraint_names)
@@ -87,15 +93,31 @@ class BvePlanner:
             self._views_precision = belief.precision()
         return self._views_precision
 
+    def note_failed_view(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        """The view from ``p_world_camera`` of the estimate ``p_world_target`` measured
+        nothing: later plans expect little of views near it (``failed_view_width_deg``)."""
+        d = np.asarray(p_world_camera, dtype=float) - np.asarray(p_world_target, dtype=float)
+        n = float(np.linalg.norm(d))
+        if self.settings.planner.failed_view_width_deg > 0.0 and np.isfinite(n) and n > 1e-9:
+            self._failed.append(d / n)
+
+    def information_model(self) -> ObservationInformation:
+        """Λn(c) as the objective sees it: discounted near the views that failed."""
+        if not self._failed:
+            return self.info
+        width = math.radians(self.settings.planner.failed_view_width_deg)
+        return FailedViewDiscount(self.info, np.array(self._failed), width)
+
     def objective(self, belief: Belief, iteration: int) -> Objective:
         """The BVE objective F(c) for this belief and iteration (eqs. 10-13)."""
         k_hat = belief.mean
         Lo = self.prior_precision(belief)
         p = self.settings.planner
+        info = self.information_model()
         terms: list[LossTerm] = [
-            DispersionLoss(self.info, k_hat, Lo)
+            DispersionLoss(info, k_hat, Lo)
             if self.loss == "dispersion"
-            else MaxEigenvalueLoss(self.info, k_hat, Lo, p.max_eigenvalue_trace_weight)
+            else MaxEigenvalueLoss(info, k_hat, Lo, p.max_eigenvalue_trace_weight)
         ]
         act = approach_activation(iteration, p.approach_aggressiveness, p.approach_set_point)
         if act > 0.0:

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 
 from bve_mj.estimation.belief import Belief
 
-__all__ = ["PlanStatus", "Planner", "ViewPlan"]
+__all__ = ["LearnsFromFailedViews", "PlanStatus", "Planner", "ViewPlan"]
 
 PlanStatus = Literal["optimal", "best_feasible", "restoring", "fallback"]
 """optimal: the optimiser converged on a feasible point. best_feasible: it did not converge
@@ -57,4 +57,15 @@ class Planner(Protocol):
 
     def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
         """The next viewpoint; ``iteration`` counts planned views from 1."""
+        ...
+
+
+@runtime_checkable
+class LearnsFromFailedViews(Protocol):
+    """A planner the episode loop tells of each view that measured nothing (or nothing the
+    filter accepted), so that it stops proposing views that cannot be used."""
+
+    def note_failed_view(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        """The camera at ``p_world_camera``, looking at the estimate ``p_world_target``, got
+        no usable measurement."""
         ...

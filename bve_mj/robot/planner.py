@@ -172,6 +172,10 @@ class KinematicBvePlanner:
         if q.shape == self.q.shape and np.all(np.isfinite(q)):
             self.q = self.kin.clip(q)
 
+    def note_failed_view(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        """See :meth:`BvePlanner.note_failed_view`."""
+        self._bve.note_failed_view(p_world_camera, p_world_target)
+
     # ------------------------------------------------------------------ plan
     def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
         t0 = time.perf_counter()

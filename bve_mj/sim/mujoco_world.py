@@ -237,6 +237,7 @@ class MujocoWorld:
                 "p_camera_m": det.p_camera.tolist(),
                 "cov_camera_m2": det.cov_camera.tolist(),
                 "trimmed_fraction": det.trimmed_fraction,
+                "arc_deg": det.arc_deg,
             }
         elif isinstance(det, NoDetection):
             out["detection"] = {"none": det.reason}
