@@ -165,6 +165,8 @@ def test_a_truss_episode_localises_its_target_within_5_mm():
             localised += 1
             assert ep.final_error_mm < 5.0, (seed, ep.final_error_mm)
             assert ep.result.final.mahalanobis_sq(ep.truth) < 16.3, seed
+        elif ep.result.outcome == "max_views":  # not finished: its covariance must say so
+            assert ep.result.final.mahalanobis_sq(ep.truth) < 16.3, seed
         else:
             assert ep.result.outcome in ("never_detected", "ambiguous", "unreliable", "stalled"), seed
     assert localised >= 2
