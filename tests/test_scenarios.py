@@ -156,10 +156,11 @@ def test_the_detection_priors_bearing_error_scales_with_the_fruit_unless_set():
 def test_a_truss_episode_localises_its_target_within_5_mm():
     """Seeded truss episodes: each localises its target within 5 mm, inside its own 99.9%
     ellipsoid, or says it could not (a target its neighbours hide from every view the arm
-    found ends never_detected); most localise."""
+    found ends never_detected; one still refining after its last view ends max_views); most
+    localise (18 of 20 in `bve-mj scenarios --only truss_chain`)."""
     (truss,) = load_suite(only=["truss_chain"])
     localised = 0
-    for seed in (0, 1, 2):
+    for seed in range(6):
         ep = run_mujoco_episode(truss.settings(), seed)
         if ep.result.outcome in ("converged", "stable"):
             localised += 1
@@ -169,7 +170,7 @@ def test_a_truss_episode_localises_its_target_within_5_mm():
             assert ep.result.final.mahalanobis_sq(ep.truth) < 16.3, seed
         else:
             assert ep.result.outcome in ("never_detected", "ambiguous", "unreliable", "stalled"), seed
-    assert localised >= 2
+    assert localised >= 4
 
 
 def test_a_truss_target_the_prior_cannot_single_out_ends_ambiguous_exit_3(tmp_path, capsys):
