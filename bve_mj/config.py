@@ -35,6 +35,7 @@ __all__ = [
     "EpisodeConfig",
     "FaultConfig",
     "FilterConfig",
+    "FilterKind",
     "FruitPrior",
     "LossName",
     "MeasurementConfig",
@@ -50,6 +51,7 @@ __all__ = [
     "SceneConfig",
     "SensorConfig",
     "Settings",
+    "StateKind",
     "WorldName",
     "describe",
     "load_settings",
@@ -58,6 +60,8 @@ __all__ = [
 ]
 
 MeasurementKind = Literal["auto", "range", "camera"]
+FilterKind = Literal["ekf", "ukf"]
+StateKind = Literal["auto", "centre", "centre_radius"]
 WorldName = Literal["synthetic", "mujoco"]
 LossName = Literal["dispersion", "max_eigenvalue"]
 OptimiserName = Literal["slsqp", "trust-constr"]
@@ -130,11 +134,23 @@ class CameraConfig:
     )
     width_px: int = field(default=640, metadata=_why("OAK-1 preview resolution", "px"))
     height_px: int = field(default=480, metadata=_why("OAK-1 preview resolution", "px"))
+    blur_sigma_px: float = field(
+        default=0.5,
+        metadata=_why(
+            "the lens and sensor's point spread (Gaussian sigma) applied to every rendered image: "
+            "edges blend over a pixel or two as a real camera's do. It replaces the renderer's "
+            "multisample anti-aliasing, which doubles the cost of a frame on a CPU (25 -> 12 ms); "
+            "0 = hard pixel edges",
+            "px",
+        ),
+    )
 
     def __post_init__(self) -> None:
         _open_interval("camera", "hfov_rad", self.hfov_rad, 0.0, math.pi, "a number in (0, pi)")
         _positive_int("camera", "width_px", self.width_px)
         _positive_int("camera", "height_px", self.height_px)
+        if not 0.0 <= _number("camera", "blur_sigma_px", self.blur_sigma_px) <= 5.0:
+            raise ConfigError("camera.blur_sigma_px", self.blur_sigma_px, "a number in [0, 5]")
 
     @property
     def focal_px(self) -> float:
@@ -240,9 +256,19 @@ class MeasurementConfig:
     sigma_c_m2: tuple[tuple[float, ...], ...] | None = field(
         default=None, metadata=_why("explicit Σc (camera frame, x = depth); None derives it", "m^2")
     )
+    noise_model: str = field(
+        default="default",
+        metadata=_why(
+            "with the radius in the state (filter.state): the detector's calibrated noise, default "
+            "(shipped) or a JSON file from bve-mj calibrate; centre_sigma_px and radius_sigma_px "
+            "are then not used"
+        ),
+    )
 
     def __post_init__(self) -> None:
         _choice("measurement", "kind", self.kind, MeasurementKind)
+        if not isinstance(self.noise_model, str) or not self.noise_model.strip():
+            raise ConfigError("measurement.noise_model", self.noise_model, "default or a JSON file path")
         _positive("measurement", "centre_sigma_px", self.centre_sigma_px)
         _positive("measurement", "radius_sigma_px", self.radius_sigma_px)
         _positive("measurement", "reference_range_m", self.reference_range_m)
@@ -268,7 +294,38 @@ def _covariance(name: str, value: Any) -> tuple[tuple[float, ...], ...]:
 
 @dataclass(frozen=True, kw_only=True)
 class FilterConfig:
-    """The EKF: static fruit (F = I), process noise Q, prior P0, optional NIS gating."""
+    """The filter: EKF or UKF over the fruit's state; static fruit (F = I), process noise Q,
+    prior P0, optional NIS gating."""
+
+    kind: FilterKind = field(
+        default="ekf",
+        metadata=_why("ekf (the paper's), or ukf (unscented: no Jacobians, sigma points through h)"),
+    )
+    state: StateKind = field(
+        default="auto",
+        metadata=_why(
+            "centre: the paper's 3-D state, the range from the apparent size with the radius the prior "
+            "assumes; centre_radius: the fruit's radius in the state too, measured as bearing and "
+            "apparent angular size (calibration biases too, when the sensor declares them); auto: "
+            "centre in the synthetic world (the paper's table), centre_radius in MuJoCo"
+        ),
+    )
+    iterations: int | None = field(
+        default=None,
+        metadata=_why(
+            "EKF: linearisations per update (1 = the EKF; more = the iterated EKF, which linearises "
+            "again at the updated mean: a bearing seen from a prior 5 cm off along the ray is "
+            "otherwise fused 1-2 mm off the ray it measured). None: 1 for the centre state (the "
+            "paper's), 10 with the radius in the state. The UKF does not iterate"
+        ),
+    )
+
+    @property
+    def ekf_iterations(self) -> int:
+        """``iterations`` with None resolved for the state."""
+        if self.iterations is not None:
+            return self.iterations
+        return 10 if self.state == "centre_radius" else 1
 
     process_sigma_m: float = field(
         default=0.0,
@@ -297,6 +354,12 @@ class FilterConfig:
     )
 
     def __post_init__(self) -> None:
+        _choice("filter", "kind", self.kind, FilterKind)
+        _choice("filter", "state", self.state, StateKind)
+        if self.iterations is not None:
+            _positive_int("filter", "iterations", self.iterations)
+            if self.iterations > 100:
+                raise ConfigError("filter.iterations", self.iterations, "an integer in [1, 100] or none")
         _non_negative("filter", "process_sigma_m", self.process_sigma_m)
         _positive("filter", "initial_sigma_m", self.initial_sigma_m)
         _positive_int("filter", "reset_after_rejections", self.reset_after_rejections)
@@ -407,6 +470,14 @@ class PlannerConfig:
             "deg",
         ),
     )
+    horizon: int = field(
+        default=1,
+        metadata=_why(
+            "views planned ahead (receding horizon: the best H views together, the first executed); "
+            "1 = the paper's greedy BVE. With the arm, views 2..H are planned without its kinematics "
+            "and the first is solved in joint space counting them as fused"
+        ),
+    )
     max_iterations: int = field(default=100, metadata=_why("optimiser iteration cap"))
     feasibility_tol: float = field(
         default=1e-7, metadata=_why("largest constraint value accepted as feasible", "m or m^2")
@@ -427,6 +498,11 @@ class PlannerConfig:
                 "planner.failed_view_width_deg", self.failed_view_width_deg, "a number in [0, 90]"
             )
         _positive_int("planner", "max_iterations", self.max_iterations)
+        if self.max_iterations > 100_000:
+            raise ConfigError("planner.max_iterations", self.max_iterations, "an integer in [1, 100000]")
+        _positive_int("planner", "horizon", self.horizon)
+        if self.horizon > 6:
+            raise ConfigError("planner.horizon", self.horizon, "an integer in [1, 6]")
         _positive("planner", "feasibility_tol", self.feasibility_tol)
 
 
@@ -1010,6 +1086,15 @@ class EpisodeConfig:
     stop_sigma_m: float = field(
         default=0.0015, metadata=_why("stop when the largest posterior std falls below this", "m")
     )
+    converge_after: int = field(
+        default=3,
+        metadata=_why(
+            "converged needs at least this many accepted measurements since the last belief reset: two "
+            "views triangulate a fruit, but a neighbour measured in one of them is then still "
+            "consistent with the other (seen in truss_cluster: 18 mm off, claiming 1.4 mm); a third "
+            "from elsewhere tells"
+        ),
+    )
     stop_stable_m: float = field(
         default=0.0003, metadata=_why("stop when the estimate moves less than this ...", "m")
     )
@@ -1047,6 +1132,7 @@ class EpisodeConfig:
     def __post_init__(self) -> None:
         _positive_int("episode", "views", self.views)
         _positive_int("episode", "stable_views", self.stable_views)
+        _positive_int("episode", "converge_after", self.converge_after)
         for f in ("band_distance_m", "band_tolerance_m", "step_m", "stop_sigma_m", "approach_distance_m"):
             _positive("episode", f, getattr(self, f))
         _non_negative("episode", "initial_error_m", self.initial_error_m)
@@ -1125,6 +1211,8 @@ class Settings:
 
         - ``measurement.kind = "auto"`` becomes ``range`` in the synthetic world (the paper's
           EKF) and ``camera`` in MuJoCo;
+        - ``filter.state = "auto"`` becomes ``centre`` in the synthetic world (the paper's
+          state) and ``centre_radius`` in MuJoCo (the fruit's radius estimated with it);
         - in MuJoCo, a ``fruit`` section left at its defaults (the paper's r_k = 35 mm ±15%)
           becomes the prior of the scene's fruit type (:meth:`FruitPrior.for_scene`): the
           estimator knows the variety it is picking, not each fruit's size. Any value set in
@@ -1136,9 +1224,21 @@ class Settings:
         if self.measurement.kind == "auto":
             kind: MeasurementKind = "range" if world == "synthetic" else "camera"
             out = dataclasses.replace(out, measurement=dataclasses.replace(out.measurement, kind=kind))
+        if self.filter.state == "auto":
+            state: StateKind = "centre" if world == "synthetic" else "centre_radius"
+            out = dataclasses.replace(out, filter=dataclasses.replace(out.filter, state=state))
         if world == "mujoco" and self.fruit == FruitPrior():
             out = dataclasses.replace(out, fruit=FruitPrior.for_scene(self.scene))
         return out
+
+    @property
+    def estimates_calibration(self) -> bool:
+        """Whether the state carries the camera's calibration biases: the radius is in the state
+        and the sensor declares a calibration error (a per-episode bias, estimated)."""
+        s = self.sensor
+        return self.filter.state == "centre_radius" and (
+            s.focal_error_rel > 0.0 or s.principal_point_error_px > 0.0
+        )
 
     @property
     def prior_source(self) -> Literal["filter", "views"]:

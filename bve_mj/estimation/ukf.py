@@ -1,0 +1,79 @@
+"""Unscented Kalman filter update (the paper's future work), beside the EKF's and with the
+same interface: ``update(belief, z, model, gate_probability)`` over any measurement model
+(only ``predict`` and ``noise_cov`` are used: no Jacobian).
+
+Sigma points: Julier's unscented transform with κ = 3 - n: 2n + 1 points, the mean and
+±√3 σ along the columns of the covariance's Cholesky factor (each axis then carries a
+Gaussian's kurtosis, whatever n), mean weights ((3 - n)/3, 1/6, ...). Its centre covariance
+weight, (3 - n)/3, is negative for n > 3 and can make the posterior indefinite; it is raised
+to 0 (in the scaled form: α = 1, β = n/3 - 1), so every covariance weight is non-negative and
+the posterior P - C S⁻¹ Cᵀ, a Schur complement of a positive semi-definite joint covariance,
+stays positive definite. The price: the spread of a quadratic term is slightly overstated
+(for h = x₀² and n = 4, variance 4m²s² + 7s⁴/3 instead of 4m²s² + 2s⁴; the EKF gives
+4m²s²). The prediction step is the EKF's (static fruit: P + Q, exact).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bve_mj.errors import EstimationError
+from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.ekf import UpdateResult, nis_threshold
+from bve_mj.estimation.models import MeasurementModel
+
+__all__ = ["sigma_points", "update"]
+
+_SPREAD = 3.0  # n + λ: sigma points at ±√3 σ
+
+
+def sigma_points(belief: Belief) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The 2n + 1 sigma points (2n + 1, n) and their mean and covariance weights."""
+    x, P = belief.mean, belief.cov
+    n = x.shape[0]
+    L = np.linalg.cholesky(_SPREAD * P)
+    X = np.vstack([x, x + L.T, x - L.T])
+    wm = np.full(2 * n + 1, 0.5 / _SPREAD)
+    wc = wm.copy()
+    wm[0] = (_SPREAD - n) / _SPREAD
+    wc[0] = max(wm[0], 0.0)
+    return X, wm, wc
+
+
+def update(
+    belief: Belief,
+    z: np.ndarray,
+    model: MeasurementModel,
+    gate_probability: float | None = None,
+) -> UpdateResult:
+    """UKF correction with measurement ``z`` of ``model``.
+
+    Raises:
+        EstimationError: if z or the model's output is not finite or of the wrong shape.
+    """
+    z = np.atleast_1d(np.asarray(z, dtype=float))
+    X, wm, wc = sigma_points(belief)
+    Z = np.array([np.atleast_1d(model.predict(xi)) for xi in X])
+    R = np.atleast_2d(model.noise_cov)
+    m = Z.shape[1]
+    if z.shape != (m,) or R.shape != (m, m):
+        raise EstimationError(f"measurement shapes disagree: z {z.shape}, h {Z.shape[1:]}, R {R.shape}")
+    if not (np.all(np.isfinite(z)) and np.all(np.isfinite(Z)) and np.all(np.isfinite(R))):
+        raise EstimationError("measurement holds NaN or infinite values; refusing to fuse it")
+    z_hat = wm @ Z
+    dZ = Z - z_hat
+    dX = X - belief.mean
+    S = (wc[:, None] * dZ).T @ dZ + R
+    S = 0.5 * (S + S.T)
+    C = (wc[:, None] * dX).T @ dZ  # cross-covariance (n, m)
+    y = z - z_hat
+    try:
+        Sinv_y = np.linalg.solve(S, y)
+        K = np.linalg.solve(S, C.T).T  # C S⁻¹
+    except np.linalg.LinAlgError as exc:
+        raise EstimationError(f"innovation covariance is singular: {exc}") from None
+    nis = float(y @ Sinv_y)
+    if gate_probability is not None and nis > nis_threshold(gate_probability, m):
+        return UpdateResult(belief, y, nis, False)
+    P_new = belief.cov - K @ S @ K.T
+    return UpdateResult(Belief(belief.mean + K @ y, 0.5 * (P_new + P_new.T)), y, nis, True)

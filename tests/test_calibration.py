@@ -1,0 +1,194 @@
+"""The calibrated noise model: its fit recovers a known noise, its file is validated, the
+calibration renders real detections; and the claims an episode makes beside its filter."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from bve_mj.cli import main
+from bve_mj.config import CameraConfig
+from bve_mj.episode import Claims, StopRules, ViewRecord
+from bve_mj.errors import ConfigError
+from bve_mj.estimation import Belief
+from bve_mj.estimation.noise import fit_noise_model, load_noise_model, measure
+from bve_mj.geometry import camera_rotation
+
+
+def _synthetic_rows(rng, fruits=40, views=12):
+    """Calibration rows whose errors follow a known model: a per-view variance
+    0.3·fit² + 0.02·partial² [px²], an apparent-radius bias -0.2 - 0.5·r/100 px, and each
+    fruit's own world offset N(0, (0.005 r)²) per axis."""
+    f = CameraConfig().focal_px
+    rows = []
+    for k in range(fruits):
+        truth = np.array([0.45, 0.0, 0.2]) + rng.normal(0, 0.05, 3)
+        radius = rng.uniform(0.024, 0.033)
+        offset = rng.normal(0.0, 0.005 * radius, 3)
+        for v in range(views):
+            d = rng.normal(size=3) * np.array([1.0, 0.6, 0.6]) - np.array([2.0, 0.0, 0.0])
+            c = truth + rng.uniform(0.15, 0.4) * d / np.linalg.norm(d)
+            R = camera_rotation(c, truth)
+            rho = float(np.linalg.norm(truth - c))
+            r_px = f * math.tan(math.asin(radius / rho))
+            arc, fit = rng.uniform(180, 360), rng.uniform(0.12, 0.5)
+            sigma = math.sqrt(0.3 * fit**2 + 0.02 * ((1 - arc / 360) * r_px / 10) ** 2)
+            shift = f / rho * (R.T @ offset)
+            rows.append({
+                "scenario": "synthetic", "scene_seed": k, "view": v, "detected": True,
+                "radius_px": r_px, "arc_deg": arc, "centre_fit_px": fit, "radius_fit_px": fit,
+                "fruit_shape_index": 0.9, "distance_m": rho, "camera_rotation": R.tolist(),
+                "true_radius_m": radius,
+                "err_u_px": shift[1] + rng.normal(0, sigma), "err_v_px": shift[2] + rng.normal(0, sigma),
+                "err_alpha_px": -0.2 - 0.5 * r_px / 100 + rng.normal(0, math.sqrt(0.25 * fit**2)),
+            })  # fmt: skip
+    return rows
+
+
+def test_the_fit_recovers_a_known_noise(rng):
+    model, report = fit_noise_model(_synthetic_rows(rng), CameraConfig(), "test")
+    fit_coef, partial = model.centre_var_px2[1], model.centre_var_px2[2]
+    assert fit_coef == pytest.approx(0.3, rel=0.25) and partial == pytest.approx(0.02, rel=0.35)
+    assert model.radius_var_px2[1] == pytest.approx(0.25, rel=0.2)
+    assert model.radius_bias_px[0] == pytest.approx(-0.2, abs=0.06)
+    assert model.radius_bias_px[1] == pytest.approx(-0.5, abs=0.1)
+    # the offsets are Gaussian here: their 3σ bound is a little over their σ (0.5% of r)
+    h, v = model.centre_bias_rel
+    assert 0.003 < h < 0.009 and 0.003 < v < 0.009
+    assert report["centre"]["z_rms"] == pytest.approx(1.0, abs=0.05)
+    assert report["gross_errors"] == 0
+
+
+def test_a_view_of_the_wrong_fruit_is_a_gross_error_not_noise(rng):
+    rows = _synthetic_rows(rng)
+    clean, _ = fit_noise_model(rows, CameraConfig(), "test")
+    rows[5] = {**rows[5], "err_u_px": 40.0, "err_v_px": -25.0}  # a neighbour measured
+    model, report = fit_noise_model(rows, CameraConfig(), "test")
+    assert report["gross_errors"] == 1
+    assert model.centre_var_px2[1] == pytest.approx(clean.centre_var_px2[1], rel=0.05)
+
+
+def test_measure_removes_the_bias_and_gives_the_models_variance():
+    model = load_noise_model("default")
+
+    class Det:  # a detection as the detector reports it
+        bearing_camera = np.array([0.99, 0.1, -0.05]) / np.linalg.norm([0.99, 0.1, -0.05])
+        radius_px, arc_deg, centre_fit_px, radius_fit_px = 60.0, 300.0, 0.2, 0.2
+        angular_radius_rad = 0.12
+
+    f = CameraConfig().focal_px
+    z, R = measure(Det(), model, 0.9, f)
+    a = Det.bearing_camera
+    assert z[:2] == pytest.approx([a[1] / a[0], a[2] / a[0]])
+    assert z[2] == pytest.approx(0.12 - model.radius_bias(60.0) / f)
+    sc, sr = model.sigmas_px(60.0, 300.0, 0.2, 0.2, 0.9)
+    assert np.sqrt(np.diag(R)) * f == pytest.approx([sc, sc, sr])
+
+
+def test_the_shipped_model_loads_and_says_what_it_is():
+    model = load_noise_model("default")
+    model.check_camera(CameraConfig(), "default")
+    assert model.samples > 1000 and "bve-mj calibrate" in model.source
+    assert model.radius_bias(60.0) < 0.0  # the mask sees the fruit smaller than it is
+
+
+@pytest.mark.parametrize(
+    ("content", "reason"),
+    [
+        (None, "readable"),
+        ("{not json", "JSON"),
+        ('{"kind": "something else"}', "written by bve-mj calibrate"),
+    ],
+)
+def test_a_bad_noise_model_file_is_a_config_error(tmp_path, content, reason):
+    path = tmp_path / "model.json"
+    if content is not None:
+        path.write_text(content)
+    with pytest.raises(ConfigError, match=reason) as err:
+        load_noise_model(str(path))
+    assert "measurement.noise_model" in str(err.value)
+
+
+def test_a_model_for_another_camera_is_refused(tmp_path):
+    doc = load_noise_model("default").to_json()
+    doc["width_px"] = 1280
+    path = tmp_path / "other.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ConfigError, match="calibrated for this camera"):
+        load_noise_model(str(path)).check_camera(CameraConfig(), str(path))
+
+
+@pytest.mark.parametrize(
+    "content", [None, "{broken", '{"kind": "bve_mj detector noise model", "version": 1}']
+)
+def test_episode_with_a_bad_noise_model_exits_2_naming_it(tmp_path, capsys, content):
+    model = tmp_path / "model.json"
+    if content is not None:
+        model.write_text(content)
+    config = tmp_path / "scenario.toml"
+    config.write_text(f'[measurement]\nnoise_model = "{model}"\n')
+    assert main(["episode", "--config", str(config), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "measurement.noise_model" in err and "Traceback" not in err
+
+
+def test_calibrate_renders_real_detections_and_writes_a_loadable_model(tmp_path, capsys):
+    out, rows = tmp_path / "model.json", tmp_path / "rows.json"
+    argv = ["calibrate", "--only", "clean", "--scenes", "3", "--views", "9", "--seed", "5", "--workers", "1"]
+    assert main([*argv, "--out", str(out), "--json", str(rows), "--quiet"]) == 0
+    model = load_noise_model(str(out))
+    model.check_camera(CameraConfig(), str(out))
+    doc = json.loads(rows.read_text())
+    detected = [r for r in doc["rows"] if r.get("detected")]
+    assert len(detected) >= 20
+    # a lone red fruit seen whole: the centre within a pixel, the radius' bias negative
+    assert np.median([abs(r["err_u_px"]) for r in detected]) < 1.0
+    assert model.radius_bias(60.0) < 0.0
+    assert "wrote" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("argv", "field"),
+    [
+        (["calibrate", "--scenes", "0"], "scenes"),
+        (["calibrate", "--views", "x"], "views"),
+        (["calibrate", "--out", "model.txt"], "out"),
+        (["calibrate", "--only", "nowhere"], "only"),
+        (["episode", "--filter", "kalman"], "filter.kind"),
+        (["episode", "--state", "position"], "filter.state"),
+        (["scenarios", "--filter", "particle", "--seeds", "1"], "filter.kind"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(argv, field, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and field in err and "Traceback" not in err
+
+
+# ---------------------------------------------------------------- what an episode claims
+def _view(i, belief, accepted=True, events=()):
+    return ViewRecord(i, np.zeros(3), None, True, 0.0, True, accepted, 1.0, belief, None, tuple(events))
+
+
+def test_claims_add_the_fruits_own_offset_and_scale_by_the_innovations():
+    b = Belief(np.array([0.4, 0.0, 0.2, 0.03]), np.diag([1e-6, 1e-6, 4e-6, 1e-8]))
+    offset = np.diag([1e-8, 1e-8, 4e-8])
+    plain = Claims(offset).claim(b, [(30.0, 3)])
+    np.testing.assert_allclose(plain.cov[:3, :3], b.cov[:3, :3] + offset)
+    assert plain.cov[3, 3] == b.cov[3, 3]
+    # views that disagree twice as much as the noise model says: s² = (6 + 2·9) / (6 + 9)
+    scaled = Claims(None, 6.0).claim(b, [(9.0, 3), (9.0, 3), (0.0, 3)])
+    np.testing.assert_allclose(scaled.cov, b.cov * (6 + 18) / (6 + 9))
+    assert Claims(None, 6.0).scale([]) == 1.0
+
+
+def test_converged_waits_for_enough_agreeing_views():
+    tight = Belief(np.zeros(3), np.eye(3) * 1e-8)
+    rules = StopRules(sigma_m=0.0015, min_accepted=3)
+    assert rules.outcome([_view(0, tight), _view(1, tight)]) is None
+    assert rules.outcome([_view(0, tight), _view(1, tight), _view(2, tight)]) == "converged"
+    # a reset starts the count again
+    views = [_view(0, tight), _view(1, tight), _view(2, tight, events=("belief_reset",)), _view(3, tight)]
+    assert rules.outcome(views) is None
+    assert StopRules(sigma_m=0.0015).outcome([_view(0, tight)]) == "converged"
