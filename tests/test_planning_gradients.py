@@ -150,3 +150,87 @@ def test_constraint_values_match_the_paper():
     cone = FieldOfViewCone(k, 0.035, math.radians(69))
     d_min = 0.035 / math.sin(math.radians(34.5))
     assert cone.value(k + np.array([d_min * 1.01, 0, 0])) < 0 < cone.value(k + np.array([d_min * 0.99, 0, 0]))
+
+
+# ---------------------------------------------------------------- the radius in the state
+from bve_mj.estimation import BearingSizeModel, SizeModel  # noqa: E402
+from bve_mj.geometry import camera_rotation  # noqa: E402
+from bve_mj.planning.information import SizeInformation  # noqa: E402
+
+SIZE_INFOS = {
+    "bearing_size": SizeInformation((2e-7, 1e-9), (1e-7, 2e-9), bearing=True),
+    "size_only": SizeInformation((2e-7, 1e-9), (1e-7, 2e-9), bearing=False),
+}
+
+
+def random_state_pair(rng, dim):
+    k = rng.uniform(-0.5, 0.5, 3)
+    direction = rng.standard_normal(3)
+    c = k + rng.uniform(0.12, 0.6) * direction / np.linalg.norm(direction)
+    x = np.concatenate([k, [rng.uniform(0.01, 0.04)], rng.normal(0, 0.004, 2), [rng.normal(0, 0.02)]])
+    return c, x[:dim]
+
+
+def random_spd_n(rng, n):
+    A = rng.standard_normal((n, n))
+    S = 0.03**2 * (A @ A.T + 0.2 * np.eye(n))
+    return S
+
+
+@pytest.mark.parametrize("name", list(SIZE_INFOS))
+@pytest.mark.parametrize("dim", [4, 7])
+def test_size_information_derivative(name, dim, rng):
+    info = SIZE_INFOS[name]
+    for _ in range(30):
+        c, x = random_state_pair(rng, dim)
+        L, dL = info.information_derivative(c, x)
+        np.testing.assert_allclose(L, info.information(c, x), rtol=1e-12)
+        fd = finite_difference(lambda cc, x=x: info.information(cc, x), c, h=1e-7)
+        np.testing.assert_allclose(dL, fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
+
+
+@pytest.mark.parametrize("dim", [4, 7])
+def test_size_information_is_the_filters_model(dim, rng):
+    """What the planner expects of a view is Hᵀ R⁻¹ H of the very model the filter fuses,
+    for a camera looking at the estimate, with the noise at that apparent size."""
+    bearing_var, size_var = (2e-7, 1e-9), (1e-7, 2e-9)
+    for _ in range(10):
+        c, x = random_state_pair(rng, dim)
+        rho = np.linalg.norm(x[:3] - c)
+        T = np.tan(np.arcsin(x[3] / rho))
+        R = camera_rotation(c, x[:3])
+        noise = np.diag([bearing_var[0] + bearing_var[1] * T**2] * 2 + [size_var[0] + size_var[1] * T**2])
+        for bearing in (True, False):
+            if bearing:
+                H, W = BearingSizeModel(c, R, noise).jacobian(x), np.linalg.inv(noise)
+            else:
+                H, W = SizeModel(c, noise[2, 2]).jacobian(x), np.array([[1.0 / noise[2, 2]]])
+            expected = H.T @ W @ H
+            got = SizeInformation(bearing_var, size_var, bearing).information(c, x)
+            np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize("name", list(SIZE_INFOS))
+@pytest.mark.parametrize("dim", [4, 7])
+def test_centre_block_losses_gradients(name, dim, rng):
+    for _ in range(20):
+        c, x = random_state_pair(rng, dim)
+        Lo = np.linalg.inv(random_spd_n(rng, dim))
+        _check_term(DispersionLoss(SIZE_INFOS[name], x, Lo), c)
+        for tau in (0.0, 0.5):
+            loss = MaxEigenvalueLoss(SIZE_INFOS[name], x, Lo, tau)
+            M = SIZE_INFOS[name].information(c, x) + Lo
+            s = np.linalg.eigvalsh(np.linalg.inv(M)[:3, :3])
+            if s[-1] - s[-2] > 1e-3 * s[-1]:
+                _check_term(loss, c)
+
+
+def test_centre_block_losses_score_the_centre_covariance(rng):
+    c, x = random_state_pair(rng, 7)
+    Lo = np.linalg.inv(random_spd_n(rng, 7))
+    info = SIZE_INFOS["bearing_size"]
+    Sigma = np.linalg.inv(info.information(c, x) + Lo)[:3, :3]
+    assert DispersionLoss(info, x, Lo).value(c) == pytest.approx(math.log(np.linalg.det(Sigma)), rel=1e-9)
+    assert MaxEigenvalueLoss(info, x, Lo, 0.5).value(c) == pytest.approx(
+        np.linalg.eigvalsh(Sigma)[-1] + 0.5 * np.trace(Sigma), rel=1e-9
+    )

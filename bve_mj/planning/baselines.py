@@ -84,7 +84,7 @@ class RandomPlanner:
     def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
         t0 = time.perf_counter()
         tol = self.settings.planner.feasibility_tol
-        k_hat, c_now = belief.mean, np.asarray(p_world_camera, dtype=float)
+        k_hat, c_now = belief.centre_m, np.asarray(p_world_camera, dtype=float)
         r_d = self.settings.constraints.step_m
         task = build_constraints(self.constraint_names, self.settings, k_hat, self.extra_constraints)
         cheap, expensive = _split(task)
@@ -141,7 +141,7 @@ class CirclePlanner:
         t0 = time.perf_counter()
         p = self.settings.planner
         tol = p.feasibility_tol
-        k_hat, c_now = belief.mean, np.asarray(p_world_camera, dtype=float)
+        k_hat, c_now = belief.centre_m, np.asarray(p_world_camera, dtype=float)
         r_d = self.settings.constraints.step_m
         task = build_constraints(self.constraint_names, self.settings, k_hat, self.extra_constraints)
         cheap, expensive = _split(task)

@@ -16,6 +16,7 @@ optimiser started there alone never moves.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -34,6 +35,7 @@ from bve_mj.planning.constraints import (
     check_constraint_names,
     max_violation,
 )
+from bve_mj.planning.horizon import HorizonObjective, horizon_constraints
 from bve_mj.planning.information import (
     FailedViewDiscount,
     ObservationInformation,
@@ -108,20 +110,26 @@ class BvePlanner:
         width = math.radians(self.settings.planner.failed_view_width_deg)
         return FailedViewDiscount(self.info, np.array(self._failed), width)
 
-    def objective(self, belief: Belief, iteration: int) -> Objective:
-        """The BVE objective F(c) for this belief and iteration (eqs. 10-13)."""
-        k_hat = belief.mean
+    def objective(
+        self, belief: Belief, iteration: int, extra_precision: np.ndarray | None = None
+    ) -> Objective:
+        """The BVE objective F(c) for this belief and iteration (eqs. 10-13); with
+        ``extra_precision``, the views planned after this one (:meth:`lookahead`) count as
+        already fused."""
+        x_hat = belief.mean
         Lo = self.prior_precision(belief)
+        if extra_precision is not None:
+            Lo = Lo + extra_precision
         p = self.settings.planner
         info = self.information_model()
         terms: list[LossTerm] = [
-            DispersionLoss(info, k_hat, Lo)
+            DispersionLoss(info, x_hat, Lo)
             if self.loss == "dispersion"
-            else MaxEigenvalueLoss(info, k_hat, Lo, p.max_eigenvalue_trace_weight)
+            else MaxEigenvalueLoss(info, x_hat, Lo, p.max_eigenvalue_trace_weight)
         ]
         act = approach_activation(iteration, p.approach_aggressiveness, p.approach_set_point)
         if act > 0.0:
-            terms.append(ApproachTerm(k_hat, act))
+            terms.append(ApproachTerm(belief.centre_m, act))
         return Objective(tuple(terms), _LOSS_SCALE[self.loss])
 
     def task_constraints(self, k_hat: np.ndarray) -> list[Constraint]:
@@ -131,28 +139,97 @@ class BvePlanner:
     def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
         """:meth:`propose` a viewpoint, then :meth:`commit` it."""
         plan = self.propose(belief, p_world_camera, iteration)
-        self.commit(plan)
+        self.commit(plan, belief)
         return plan
 
-    def commit(self, plan: ViewPlan) -> None:
-        """Record that the camera goes to ``plan``: with ``prior_source = views`` its Σn is
-        fused into Σo (eq. 9)."""
+    def commit(self, plan: ViewPlan, belief: Belief) -> None:
+        """Record that the camera goes to ``plan``: with ``prior_source = views`` its Σn at the
+        estimate ``belief`` is fused into Σo (eq. 9)."""
         if self._views_precision is not None:
-            self._views_precision = self._views_precision + self.info.information(
-                plan.p_world_camera, plan.p_world_target
-            )
+            x_hat = np.concatenate([plan.p_world_target, belief.mean[3:]])
+            self._views_precision = self._views_precision + self.info.information(plan.p_world_camera, x_hat)
 
     def propose(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
-        """The best viewpoint for this belief, without changing the planner's state."""
+        """The best viewpoint for this belief, without changing the planner's state: the
+        greedy BVE's, or with ``planner.horizon`` > 1 the first of the best H views."""
+        t0 = time.perf_counter()
+        plan = self._greedy(
+            belief, np.asarray(p_world_camera, dtype=float), iteration, self.objective(belief, iteration)
+        )
+        if self.settings.planner.horizon > 1 and plan.feasible:
+            ahead = self.plan_ahead(
+                belief, np.asarray(p_world_camera, dtype=float), iteration, plan.p_world_camera
+            )
+            if ahead is not None:
+                plan = dataclasses.replace(
+                    plan, p_world_camera=ahead[0], loss=self.objective(belief, iteration).value(ahead[0])
+                )
+        return dataclasses.replace(plan, plan_s=time.perf_counter() - t0)
+
+    def plan_ahead(
+        self, belief: Belief, c_now: np.ndarray, iteration: int, first: np.ndarray
+    ) -> np.ndarray | None:
+        """The best ``planner.horizon`` views (H, 3) from ``c_now`` for this belief, started from
+        the greedy roll-out whose first view is ``first`` (see :mod:`bve_mj.planning.horizon`);
+        None when the approach term is on (it rewards the last view, not the path) or no
+        feasible roll-out exists."""
+        p = self.settings.planner
+        if approach_activation(iteration, p.approach_aggressiveness, p.approach_set_point) > 0.0:
+            return None
+        H, r = p.horizon, self.settings.constraints.step_m
+        info = self.information_model()
+        x_hat = belief.mean
+        Lo = self.prior_precision(belief)
+        views = [np.asarray(first, dtype=float)]
+        extra = info.information(views[0], x_hat)
+        for h in range(1, H):  # the greedy roll-out: each view the best given those before it
+            nxt = self._greedy(belief, views[-1], iteration + h, self.objective(belief, iteration + h, extra))
+            if not nxt.feasible:
+                return None
+            views.append(nxt.p_world_camera)
+            extra = extra + info.information(nxt.p_world_camera, x_hat)
+        task = self.task_constraints(belief.centre_m)
+        every: list[Constraint] = [*task, StepLimit(c_now, r)]
+        cons = horizon_constraints(every, H, r)
+        objective = HorizonObjective(
+            info, x_hat, Lo, self.loss, p.max_eigenvalue_trace_weight, _LOSS_SCALE[self.loss]
+        )
+        z0 = np.concatenate(views)
+        res = minimise(objective.value_and_gradient, cons, z0, p.optimiser, p.max_iterations)
+        if (
+            np.all(np.isfinite(res.x))
+            and max_violation(cons, res.x) <= p.feasibility_tol
+            and objective.value(res.x) <= objective.value(z0)
+        ):
+            return res.x.reshape(H, 3)
+        return z0.reshape(H, 3)
+
+    def lookahead(self, belief: Belief, c_now: np.ndarray, iteration: int) -> np.ndarray | None:
+        """The precision the views after the first of a ``planner.horizon`` plan would add (a
+        planner that solves the first view its own way, the arm's in joint space, counts them
+        as fused); None with no horizon or no feasible plan."""
+        if self.settings.planner.horizon <= 1:
+            return None
+        first = self._greedy(
+            belief, np.asarray(c_now, dtype=float), iteration, self.objective(belief, iteration)
+        )
+        if not first.feasible:
+            return None
+        ahead = self.plan_ahead(belief, c_now, iteration, first.p_world_camera)
+        if ahead is None:
+            return None
+        info = self.information_model()
+        return sum((info.information(c, belief.mean) for c in ahead[1:]), np.zeros_like(belief.cov))
+
+    def _greedy(self, belief: Belief, c_now: np.ndarray, iteration: int, objective: Objective) -> ViewPlan:
+        """The greedy BVE: the best single view from ``c_now`` under ``objective``."""
         t0 = time.perf_counter()
         p = self.settings.planner
         tol = p.feasibility_tol
-        k_hat = belief.mean
-        c_now = np.asarray(p_world_camera, dtype=float)
+        k_hat = belief.centre_m
         task = self.task_constraints(k_hat)
         step = StepLimit(c_now, self.settings.constraints.step_m)
         x_start, ok = feasible_start(task, step, c_now, tol)
-        objective = self.objective(belief, iteration)
 
         loss = objective.value
         if not ok:

@@ -1,12 +1,19 @@
 """What one view adds to the belief: the information matrix Λn(c) = Σn(c)⁻¹ and ∂Λn/∂c.
 
 The BVE scores a candidate camera position c by fusing Λn(c) with the current precision
-(paper eqs. 9-11). Two planning models (``PlannerConfig.planning_model``):
+(paper eqs. 9-11). The information is over the whole state (its mean x̂: the centre k̂
+first, then the radius and the calibration biases where the state holds them). Planning
+models (``PlannerConfig.planning_model``, for the centre-only state):
 
 - ``paper``: Σn = R Σc Rᵀ whatever the filter measures (eq. 3), so Λn = R Σc⁻¹ Rᵀ.
 - ``consistent``: the information the filter's measurement really adds. For the camera
   measurement that is again R Σc⁻¹ Rᵀ; for the paper's range-only EKF it is the rank-one
   e eᵀ/σ_xx along the viewing ray e (a range says nothing across the ray).
+
+With the radius in the state the planner plans with the filter's own model
+(:class:`SizeInformation`): Hᵀ W H of the bearing/size (or size-only) measurement of a
+camera at c looking at k̂, with the noise the calibrated model expects of a whole fruit at
+that distance. The losses score the centre's block of the fused covariance.
 
 Views that failed: a view that measured nothing (the target hidden by its neighbours, a
 leaf, too little of its outline) says where the target cannot be seen from. The planner
@@ -34,19 +41,34 @@ __all__ = [
     "FailedViewDiscount",
     "ObservationInformation",
     "RangeInformation",
+    "SizeInformation",
     "observation_information",
+    "size_information",
 ]
 
 
-class ObservationInformation(Protocol):
-    """Λn(c) for a camera at c looking at the estimate k̂."""
+def _pad(L: np.ndarray, dL: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """Information (3, 3) on the centre (and its derivative (3, 3, 3)) as one on a state of n."""
+    if n == 3:
+        return L, dL
+    Ln = np.zeros((n, n))
+    Ln[:3, :3] = L
+    if dL is None:
+        return Ln, None
+    dLn = np.zeros((n, n, 3))
+    dLn[:3, :3] = dL
+    return Ln, dLn
 
-    def information(self, c: np.ndarray, k_hat: np.ndarray) -> np.ndarray:
-        """Λn, (3, 3) [1/m²]."""
+
+class ObservationInformation(Protocol):
+    """Λn(c) for a camera at c looking at the estimate, over the state whose mean is x̂ (n,)."""
+
+    def information(self, c: np.ndarray, x_hat: np.ndarray) -> np.ndarray:
+        """Λn, (n, n)."""
         ...
 
-    def information_derivative(self, c: np.ndarray, k_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Λn (3, 3) and ∂Λn/∂c (3, 3, 3), ``[:, :, j]`` = ∂Λn/∂c_j."""
+    def information_derivative(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Λn (n, n) and ∂Λn/∂c (n, n, 3), ``[:, :, j]`` = ∂Λn/∂c_j."""
         ...
 
 
@@ -59,17 +81,19 @@ class CameraInformation:
     def __post_init__(self) -> None:
         object.__setattr__(self, "_W", np.linalg.inv(np.asarray(self.sigma_c_m2, dtype=float)))
 
-    def information(self, c: np.ndarray, k_hat: np.ndarray) -> np.ndarray:
-        R = camera_rotation(c, k_hat)
+    def information(self, c: np.ndarray, x_hat: np.ndarray) -> np.ndarray:
+        R = camera_rotation(c, x_hat[:3])
         W: np.ndarray = self._W  # type: ignore[attr-defined]
-        return R @ W @ R.T
+        return _pad(R @ W @ R.T, None, len(x_hat))[0]
 
-    def information_derivative(self, c: np.ndarray, k_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        R, dR = camera_rotation_derivative(c, k_hat)
+    def information_derivative(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        R, dR = camera_rotation_derivative(c, x_hat[:3])
         W: np.ndarray = self._W  # type: ignore[attr-defined]
         RW = R @ W
         T = np.einsum("ikj,lk->ilj", dR, RW)  # dR_j W Rᵀ
-        return RW @ R.T, T + T.transpose(1, 0, 2)
+        L, dL = _pad(RW @ R.T, T + T.transpose(1, 0, 2), len(x_hat))
+        assert dL is not None
+        return L, dL
 
 
 @dataclass(frozen=True)
@@ -78,15 +102,17 @@ class RangeInformation:
 
     variance_m2: float
 
-    def information(self, c: np.ndarray, k_hat: np.ndarray) -> np.ndarray:
-        e = camera_rotation(c, k_hat)[:, 0]
-        return np.outer(e, e) / self.variance_m2
+    def information(self, c: np.ndarray, x_hat: np.ndarray) -> np.ndarray:
+        e = camera_rotation(c, x_hat[:3])[:, 0]
+        return _pad(np.outer(e, e) / self.variance_m2, None, len(x_hat))[0]
 
-    def information_derivative(self, c: np.ndarray, k_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        R, dR = camera_rotation_derivative(c, k_hat)
+    def information_derivative(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        R, dR = camera_rotation_derivative(c, x_hat[:3])
         e, de = R[:, 0], dR[:, 0, :]
         T = np.einsum("ij,k->ikj", de, e) / self.variance_m2
-        return np.outer(e, e) / self.variance_m2, T + T.transpose(1, 0, 2)
+        L, dL = _pad(np.outer(e, e) / self.variance_m2, T + T.transpose(1, 0, 2), len(x_hat))
+        assert dL is not None
+        return L, dL
 
 
 @dataclass(frozen=True)
@@ -99,9 +125,9 @@ class FailedViewDiscount:
     failed: np.ndarray
     width_rad: float
 
-    def odds(self, c: np.ndarray, k_hat: np.ndarray) -> tuple[float, np.ndarray]:
+    def odds(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[float, np.ndarray]:
         """p(c) and ∂p/∂c (3,)."""
-        d = np.asarray(c, dtype=float) - k_hat
+        d = np.asarray(c, dtype=float) - x_hat[:3]
         r = float(np.linalg.norm(d))
         e = d / r
         w = 1.0 - math.cos(self.width_rad)
@@ -115,18 +141,139 @@ class FailedViewDiscount:
         others = np.array([np.prod(np.delete(q, j)) for j in range(len(q))])
         return p, others @ dq
 
-    def information(self, c: np.ndarray, k_hat: np.ndarray) -> np.ndarray:
-        return self.odds(c, k_hat)[0] * self.base.information(c, k_hat)
+    def information(self, c: np.ndarray, x_hat: np.ndarray) -> np.ndarray:
+        return self.odds(c, x_hat)[0] * self.base.information(c, x_hat)
 
-    def information_derivative(self, c: np.ndarray, k_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        L, dL = self.base.information_derivative(c, k_hat)
-        p, dp = self.odds(c, k_hat)
+    def information_derivative(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        L, dL = self.base.information_derivative(c, x_hat)
+        p, dp = self.odds(c, x_hat)
         return p * L, p * dL + L[:, :, None] * dp[None, None, :]
+
+
+@dataclass(frozen=True)
+class SizeInformation:
+    """Λn = Hᵀ W H of the bearing/size measurement (or, ``bearing = False``, the apparent size
+    alone) of a camera at c looking at the estimate, over a state (4,) or (7,) (see
+    :mod:`bve_mj.estimation.models`), linearised at x̂.
+
+    Looking at k̂ the camera sees it on its axis at ρ = ‖k̂ - c‖ with apparent radius
+    α = asin(r̂/ρ), T = tan α; g = 1 + ε̂ with the focal bias ε̂ (0 without biases). Rows of H:
+    bearing u: (y_C/(ρg), 0, 1/g, 0, -δ̂y/g²), v: (z_C/(ρg), 0, 0, 1/g, -δ̂z/g²); size:
+    (-A₁ T x_C/ρ, A₁/(ρ cos α), 0, 0, A₂) with A₁ = g(1 + T²)/(g² + T²), A₂ = -T/(g² + T²)
+    (the bias columns only in a state of 7). The noise the calibrated model expects of a
+    whole fruit of apparent radius f·T [px], as variances [rad²] of the form a + b·T²:
+    ``bearing_var`` and ``size_var``. Every factor is a function of ρ (and R_C^W of c): the
+    derivative is analytic.
+    """
+
+    bearing_var: tuple[float, float]
+    size_var: tuple[float, float]
+    bearing: bool = True
+
+    def _rows(self, c: np.ndarray, x_hat: np.ndarray, with_derivative: bool) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None
+    ]:  # fmt: skip
+        """H (m, n), W (m,), and their derivatives in c: (m, n, 3), (m, 3)."""
+        n = len(x_hat)
+        k, r = x_hat[:3], float(x_hat[3])
+        dy, dz, eps = (x_hat[4], x_hat[5], x_hat[6]) if n == 7 else (0.0, 0.0, 0.0)
+        g = 1.0 + eps
+        if with_derivative:
+            R, dR = camera_rotation_derivative(c, k)
+        else:
+            R, dR = camera_rotation(c, k), None
+        x = R[:, 0]
+        rho = float(np.linalg.norm(k - np.asarray(c, dtype=float)))
+        s = min(r / rho, 0.99)
+        cos_a = math.sqrt(1.0 - s * s)
+        T = s / cos_a
+        sec = 1.0 / cos_a
+        den = g * g + T * T
+        A1 = g * (1.0 + T * T) / den
+        A2 = -T / den
+        # scalar factors of ρ and their derivatives d/dρ (dα/dρ = -T/ρ, dT/dρ = -(1 + T²) T/ρ)
+        dT = -(1.0 + T * T) * T / rho
+        dA1 = 2.0 * g * T * (g * g - 1.0) / den**2 * dT
+        dA2 = -(g * g - T * T) / den**2 * dT
+        s_a, ds_a = -A1 * T / rho, -(dA1 * T + A1 * dT) / rho + A1 * T / rho**2
+        s_r = A1 * sec / rho
+        ds_r = (dA1 * sec + A1 * sec * T * (-T / rho)) / rho - A1 * sec / rho**2
+        va, vb = self.size_var
+        w_a, dw_a = 1.0 / (va + vb * T * T), -(2.0 * vb * T * dT) / (va + vb * T * T) ** 2
+        rows, drows_rho, w, dw_rho = [], [], [], []
+        size = np.zeros(n)
+        size[:3], size[3] = s_a * x, s_r
+        dsize = np.zeros(n)
+        dsize[:3], dsize[3] = ds_a * x, ds_r
+        if n == 7:
+            size[6], dsize[6] = A2, dA2
+        if self.bearing:
+            ba, bb = self.bearing_var
+            w_b, dw_b = 1.0 / (ba + bb * T * T), -(2.0 * bb * T * dT) / (ba + bb * T * T) ** 2
+            for axis, delta, col in ((1, dy, 4), (2, dz, 5)):
+                h, dh = np.zeros(n), np.zeros(n)
+                h[:3], dh[:3] = R[:, axis] / (rho * g), -R[:, axis] / (rho * rho * g)
+                if n == 7:
+                    h[col], h[6] = 1.0 / g, -delta / g**2
+                rows.append(h)
+                drows_rho.append(dh)
+                w.append(w_b)
+                dw_rho.append(dw_b)
+        rows.append(size)
+        drows_rho.append(dsize)
+        w.append(w_a)
+        dw_rho.append(dw_a)
+        H, W = np.array(rows), np.array(w)
+        if dR is None:
+            return H, W, None, None
+        drho = -x  # dρ/dc
+        dH = np.einsum("mi,j->mij", np.array(drows_rho), drho)
+        # the columns of R_C^W in the centre's entries: d(coefficient · axis)/dc = coefficient · d(axis)/dc
+        if self.bearing:
+            dH[0, :3, :] += dR[:, 1, :] / (rho * g)
+            dH[1, :3, :] += dR[:, 2, :] / (rho * g)
+        dH[-1, :3, :] += s_a * dR[:, 0, :]
+        dW = np.outer(np.array(dw_rho), drho)
+        return H, W, dH, dW
+
+    def information(self, c: np.ndarray, x_hat: np.ndarray) -> np.ndarray:
+        H, W, _, _ = self._rows(c, x_hat, False)
+        return (H.T * W) @ H
+
+    def information_derivative(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        H, W, dH, dW = self._rows(c, x_hat, True)
+        assert dH is not None and dW is not None
+        HW = H.T * W  # (n, m)
+        T = np.einsum("im,mjk->ijk", HW, dH)  # Hᵀ W dH
+        return HW @ H, T + T.transpose(1, 0, 2) + np.einsum("mi,mk,mj->ijk", H, dW, H)
+
+
+def size_information(settings: Settings) -> SizeInformation:
+    """The planner's model for the radius-in-state filter under ``settings``: the calibrated
+    noise (``measurement.noise_model``) of a whole fruit of the prior's shape index, and
+    the encoders' white bearing noise."""
+    from bve_mj.estimation.noise import load_noise_model
+
+    noise = load_noise_model(settings.measurement.noise_model)
+    f = settings.camera.focal_px
+    elongation = max(settings.fruit.shape_index - 1.0, 0.0)
+    fit = noise.typical_fit_px
+    # σ² [px²] = a + b·r_px² with r_px = f·T: in rad², a/f² + b·T²
+    whole = np.array([1.0, fit**2, 0.0, 0.0])  # the floor and fit terms; nothing hidden
+    c0, c1 = float(np.dot(noise.centre_var_px2, whole)), noise.centre_var_px2[3] * (elongation / 10.0) ** 2
+    r0, r1 = float(np.dot(noise.radius_var_px2, whole)), noise.radius_var_px2[3] * (elongation / 10.0) ** 2
+    enc = (2.5 * settings.sensor.encoder_noise_rad) ** 2
+    return SizeInformation(
+        (c0 / f**2 + enc, float(c1)), (r0 / f**2, float(r1)), settings.measurement.kind != "range"
+    )
 
 
 def observation_information(settings: Settings) -> ObservationInformation:
     """The information model the planner uses under ``settings`` (``measurement.kind = "auto"``
-    outside a world is the paper's range measurement; the closed loop resolves it first)."""
+    outside a world is the paper's range measurement; the closed loop resolves it first; with
+    the radius in the state, :func:`size_information`)."""
+    if settings.filter.state == "centre_radius":
+        return size_information(settings)
     sigma_c = settings.sigma_c_m2()
     if settings.planner.planning_model == "consistent" and settings.measurement.kind in ("range", "auto"):
         return RangeInformation(float(sigma_c[0, 0]))

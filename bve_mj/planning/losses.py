@@ -5,9 +5,10 @@
 - :class:`ApproachTerm` (eqs. 12-13): act(i, a, b)·‖k̂ - c‖ with act = 1/(1 + e^(-a(i - b))),
   b the set point (the paper's text writes c by mistake).
 
-Λo = Σo⁻¹ is the current fused precision (the EKF's P⁻¹). Gradients:
-∂f/∂c_j = -tr(M⁻¹ ∂Λn/∂c_j) for the dispersion; -λ² vᵀ ∂Λn/∂c_j v for the largest
-eigenpair (λ, v) of M⁻¹ (defined where λmax is simple).
+Λo = Σo⁻¹ is the current fused precision (the EKF's P⁻¹). With the radius (and calibration
+biases) in the state, the losses score the centre's block of the fused covariance.
+Gradients: ∂f/∂c_j = -tr(M⁻¹ ∂Λn/∂c_j) for the dispersion; -λ² vᵀ ∂Λn/∂c_j v for the
+largest eigenpair (λ, v) of M⁻¹ (defined where λmax is simple).
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ __all__ = [
     "MaxEigenvalueLoss",
     "Objective",
     "approach_activation",
+    "dispersion",
+    "max_eigenvalue",
 ]
 
 
@@ -42,33 +45,74 @@ class LossTerm(Protocol):
         ...
 
 
+def _nuisance(M: np.ndarray) -> np.ndarray | None:
+    """The block of M beyond the centre (radius, calibration biases), or None (3, 3)."""
+    return M[3:, 3:] if M.shape[0] > 3 else None
+
+
+def dispersion(M: np.ndarray, dM: np.ndarray) -> tuple[float, np.ndarray]:
+    """ln det of the centre's block of M⁻¹ (M (n, n) a fused precision) and its derivative
+    along each of the k variables ``dM`` (n, n, k) is the derivative of M in."""
+    Minv = np.linalg.inv(M)
+    value = -float(np.linalg.slogdet(M)[1])
+    grad = -np.einsum("ik,kij->j", Minv, dM)  # -tr(M⁻¹ dM_j)
+    Mb = _nuisance(M)
+    if Mb is not None:
+        value += float(np.linalg.slogdet(Mb)[1])
+        grad = grad + np.einsum("ik,kij->j", np.linalg.inv(Mb), dM[3:, 3:])
+    return value, grad
+
+
+def max_eigenvalue(M: np.ndarray, dM: np.ndarray, trace_weight: float) -> tuple[float, np.ndarray]:
+    """λmax + τ·tr of the centre's block of M⁻¹ and its derivative along ``dM`` (n, n, k)."""
+    if M.shape[0] > 3:  # dΣ = -[M⁻¹ dM M⁻¹]_cc
+        Minv = np.linalg.inv(M)
+        sig, V = np.linalg.eigh(Minv[:3, :3])
+        left = Minv[:, :3] @ V[:, -1]  # M⁻¹ E v
+        grad = -np.einsum("i,ikj,k->j", left, dM, left)
+        value = float(sig[-1])
+        if trace_weight:
+            B = Minv[:, :3] @ Minv[:3, :]  # M⁻¹ Eᵀ E M⁻¹
+            grad = grad - trace_weight * np.einsum("ik,kij->j", B, dM)
+            value += trace_weight * float(np.sum(sig))
+        return value, grad
+    w, V = np.linalg.eigh(M)
+    lam, v = 1.0 / w[0], V[:, 0]  # largest variance = 1 / smallest precision eigenvalue
+    grad = -(lam**2) * np.einsum("i,ikj,k->j", v, dM, v)
+    if trace_weight == 0.0:
+        return lam, grad
+    S = (V / w) @ V.T  # Σu = M⁻¹
+    tr_grad = -np.einsum("ik,kij->j", S @ S, dM)  # ∂tr(M⁻¹) = -tr(M⁻¹ dM M⁻¹)
+    return lam + trace_weight * float(np.sum(1.0 / w)), grad + trace_weight * tr_grad
+
+
 @dataclass(frozen=True)
 class DispersionLoss:
-    """-ln det(Λn(c) + Λo): the log-volume of the fused covariance (eq. 10)."""
+    """ln det of the centre's fused covariance: -ln det(Λn(c) + Λo) for a centre-only state
+    (eq. 10); for a larger state, ln det([M⁻¹]_cc) = -ln det M + ln det M_bb (Schur
+    complement; M = Λn(c) + Λo, bb the radius and biases)."""
 
     info: ObservationInformation
-    k_hat: np.ndarray
+    x_hat: np.ndarray
     prior_precision: np.ndarray
 
     def value(self, c: np.ndarray) -> float:
-        M = self.info.information(c, self.k_hat) + self.prior_precision
-        return -float(np.linalg.slogdet(M)[1])
+        M = self.info.information(c, self.x_hat) + self.prior_precision
+        Mb = _nuisance(M)
+        return -float(np.linalg.slogdet(M)[1]) + (0.0 if Mb is None else float(np.linalg.slogdet(Mb)[1]))
 
     def gradient(self, c: np.ndarray) -> np.ndarray:
         return self.value_and_gradient(c)[1]
 
     def value_and_gradient(self, c: np.ndarray) -> tuple[float, np.ndarray]:
-        L, dL = self.info.information_derivative(c, self.k_hat)
-        M = L + self.prior_precision
-        Minv = np.linalg.inv(M)
-        value = -float(np.linalg.slogdet(M)[1])
-        grad = -np.einsum("ik,kij->j", Minv, dL)  # -tr(M⁻¹ dΛ_j)
-        return value, grad
+        L, dL = self.info.information_derivative(c, self.x_hat)
+        return dispersion(L + self.prior_precision, dL)
 
 
 @dataclass(frozen=True)
 class MaxEigenvalueLoss:
-    """λmax((Λn(c) + Λo)⁻¹) + τ·tr((Λn(c) + Λo)⁻¹) [m²] (eq. 11, τ = 0 as printed).
+    """λmax(Σ) + τ·tr(Σ) [m²] of the centre's fused covariance Σ = [(Λn(c) + Λo)⁻¹]_cc
+    (eq. 11, τ = 0 as printed).
 
     Where the largest variance is repeated (after one range measurement of an isotropic
     prior it is), eq. 11 is flat: no single view lowers it. The small trace term τ breaks
@@ -76,27 +120,24 @@ class MaxEigenvalueLoss:
     """
 
     info: ObservationInformation
-    k_hat: np.ndarray
+    x_hat: np.ndarray
     prior_precision: np.ndarray
     trace_weight: float = 0.0
 
     def value(self, c: np.ndarray) -> float:
-        w = np.linalg.eigvalsh(self.info.information(c, self.k_hat) + self.prior_precision)
+        M = self.info.information(c, self.x_hat) + self.prior_precision
+        if M.shape[0] > 3:
+            v = np.linalg.eigvalsh(np.linalg.inv(M)[:3, :3])
+            return float(v[-1]) + self.trace_weight * float(np.sum(v))
+        w = np.linalg.eigvalsh(M)
         return 1.0 / float(w[0]) + self.trace_weight * float(np.sum(1.0 / w))
 
     def gradient(self, c: np.ndarray) -> np.ndarray:
         return self.value_and_gradient(c)[1]
 
     def value_and_gradient(self, c: np.ndarray) -> tuple[float, np.ndarray]:
-        L, dL = self.info.information_derivative(c, self.k_hat)
-        w, V = np.linalg.eigh(L + self.prior_precision)
-        lam, v = 1.0 / w[0], V[:, 0]  # largest variance = 1 / smallest precision eigenvalue
-        grad = -(lam**2) * np.einsum("i,ikj,k->j", v, dL, v)
-        if self.trace_weight == 0.0:
-            return lam, grad
-        S = (V / w) @ V.T  # Σu = M⁻¹
-        tr_grad = -np.einsum("ik,kij->j", S @ S, dL)  # ∂tr(M⁻¹) = -tr(M⁻¹ dM M⁻¹)
-        return lam + self.trace_weight * float(np.sum(1.0 / w)), grad + self.trace_weight * tr_grad
+        L, dL = self.info.information_derivative(c, self.x_hat)
+        return max_eigenvalue(L + self.prior_precision, dL, self.trace_weight)
 
 
 def approach_activation(iteration: int, aggressiveness: float, set_point: float) -> float:

@@ -184,7 +184,7 @@ class KinematicBvePlanner:
             plan = self._plan_cartesian(belief, c_now, iteration, t0)
         else:
             plan = self._plan_joint(belief, c_now, iteration, t0)
-        self._bve.commit(plan)
+        self._bve.commit(plan, belief)
         if plan.q is not None:
             self.q = plan.q.copy()
         return plan
@@ -201,11 +201,11 @@ class KinematicBvePlanner:
 
     def _plan_joint(self, belief: Belief, c_now: np.ndarray, iteration: int, t0: float) -> ViewPlan:
         tol = self.settings.planner.feasibility_tol
-        k_hat = belief.mean
+        k_hat = belief.centre_m
         task = self._bve.task_constraints(k_hat)
         step = StepLimit(c_now, self.settings.constraints.step_m)
         every: list[Constraint] = [*task, step]
-        objective = self._bve.objective(belief, iteration)
+        objective = self._bve.objective(belief, iteration, self._bve.lookahead(belief, c_now, iteration))
         prob = _JointProblem(self.kin, k_hat)
         bounds = list(zip(self.kin.limits.lower, self.kin.limits.upper, strict=True))
 
