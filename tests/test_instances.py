@@ -82,7 +82,13 @@ class Probe:
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         mujoco.mj_forward(self.model, self.data)
-        self.renderer = OffscreenRenderer(self.model, CAMERA.width_px, CAMERA.height_px, hidden_groups=(2,))
+        self.renderer = OffscreenRenderer(
+            self.model,
+            CAMERA.width_px,
+            CAMERA.height_px,
+            hidden_groups=(2,),
+            blur_sigma_px=CAMERA.blur_sigma_px,
+        )
 
     def view(self, fruit, distance, azimuth_deg, elevation_deg, aim_offset=(0.0, 0.0, 0.0)):
         """The image from ``distance`` off the fruit on the robot's side, turned by the angles;

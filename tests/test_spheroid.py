@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from bve_mj.perception.spheroid import fit_spheroid, grazing_residuals
+from tests.conftest import finite_difference
 
 F_PX = 462.0  # about the wrist camera's focal length
 
@@ -87,3 +88,35 @@ def test_a_spheroid_fit_finds_the_centre_of_a_fruit_seen_in_part(k):
     assert fit.shape_index == pytest.approx(k, rel=0.02)
     lat, sig_alpha = fit.sigmas((0.15 / F_PX) ** 2, 1.0, 0.3)
     assert 0.0 < lat < 0.2 / F_PX and 0.0 < sig_alpha < 0.2 / F_PX
+
+
+def test_the_analytic_jacobian_matches_finite_differences_on_the_silhouette():
+    """On the silhouette (g = 0) the Gauss-Newton Jacobian of the residual is its derivative."""
+    from scipy.optimize import brentq
+
+    from bve_mj.perception.spheroid import grazing_jacobian
+
+    up = np.array([0.0, 0.1, 1.0]) / np.linalg.norm([0.0, 0.1, 1.0])
+    p, k = np.array([8.0, 0.5, -0.3]), 0.85
+    axis = p / np.linalg.norm(p)
+    e1 = np.cross(axis, [0.0, 0.0, 1.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    rays = []
+    for phi in np.linspace(0.0, 2.0 * np.pi, 24, endpoint=False):
+        d = np.cos(phi) * e1 + np.sin(phi) * e2
+
+        def g(t, d=d):
+            b = axis + t * d
+            return grazing_residuals(p, k, up, (b / np.linalg.norm(b))[None])[0]
+
+        b = axis + brentq(g, 0.0, 0.5) * d
+        rays.append(b / np.linalg.norm(b))
+    rays = np.array(rays)
+    x = np.append(p, np.log(k))
+
+    def resid(xx):
+        return grazing_residuals(xx[:3], np.exp(xx[3]), up, rays)
+
+    fd = finite_difference(resid, x, 1e-7)
+    np.testing.assert_allclose(grazing_jacobian(p, k, up, rays), fd, atol=1e-6 * np.abs(fd).max())

@@ -89,6 +89,12 @@ class Detection:
         area_px: blob area; boundary_points: silhouette points used in the fit;
         trimmed_fraction: share of boundary points rejected as occluder or image edges.
         arc_deg: how much of the fruit's outline the fit saw (10° sectors around its centre).
+        centre_fit_px, radius_fit_px: the fit's own 1σ of the centre (across the bearing, the
+            worse direction) and of the apparent radius, from its residuals and how much
+            outline it saw [px, as f·angle].
+        centre_jackknife_px, radius_jackknife_px: the spread of the fits that leave one arc
+            of the outline out (0 for a single arc) [px, as f·angle].
+    The noise model (:mod:`bve_mj.estimation.noise`) turns these into the measurement's σ.
     """
 
     centre_px: np.ndarray
@@ -102,6 +108,10 @@ class Detection:
     boundary_points: int
     trimmed_fraction: float
     arc_deg: float = 360.0
+    centre_fit_px: float = 0.0
+    radius_fit_px: float = 0.0
+    centre_jackknife_px: float = 0.0
+    radius_jackknife_px: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -296,16 +306,22 @@ def _fit_sigmas(fit: _Fit, uv: np.ndarray, f: float) -> tuple[float, float]:
 
 
 def _arc_jackknife(
-    rays: np.ndarray, keep: np.ndarray, arc_of: np.ndarray, axis: np.ndarray, alpha: float, min_points: int
+    rays: np.ndarray, keep: np.ndarray, arc_of: np.ndarray, min_points: int
 ) -> tuple[float, float]:
     """Jackknife over the outline's arcs: the cone refitted without each arc in turn (where
     the rest still has ``min_points``), 1σ of the axis across it (the worse direction) and of
-    α [rad] from the replicates' deviations from the full fit (``axis``, ``alpha``), scaled
-    by (n - 1)/n for n arcs. Zero for a single arc (nothing to compare)."""
+    α [rad] from the replicates' deviations from the cone through every kept point, scaled
+    by (n - 1)/n for n arcs. Zero for a single arc (nothing to compare). The reference is
+    that cone, not the spheroid the detector reports: for a flattened fruit the two differ
+    by a few pixels, which is the spheroid's correction, not a disagreement of the arcs."""
     labels = np.unique(arc_of[keep])
     n = len(labels)
     if n < 2:
         return 0.0, 0.0
+    axis, cos_a = _fit_cone(rays[keep])
+    if not 0.0 < cos_a < 1.0:
+        return 0.0, 0.0
+    alpha = math.acos(cos_a)
     C, var_alpha = np.zeros((3, 3)), 0.0
     for j in labels:
         rest = keep & (arc_of != j)
@@ -344,6 +360,15 @@ def _blobs(mask: np.ndarray) -> list[_Blob]:
         x, y, w, h = cv2.boundingRect(c)
         out.append(_Blob(pts, area, (x, y, w, h), centroid + 0.5))
     return out
+
+
+def _shifted(blob: _Blob, dx: int, dy: int) -> _Blob:
+    """``blob`` of a crop whose corner is (dx, dy), in the whole image's pixels."""
+    if dx == 0 and dy == 0:
+        return blob
+    x, y, w, h = blob.box
+    d = np.array([dx, dy], dtype=float)
+    return _Blob(blob.outline + d, blob.area, (x + dx, y + dy, w, h), blob.centroid + d)
 
 
 def _inside(fruit: FruitOutline, circle: Circle) -> bool:
@@ -509,20 +534,15 @@ def detect(
         return NoDetection(problem)
     if (intrinsics.height_px, intrinsics.width_px) != image_rgb.shape[:2]:
         return NoDetection(f"image {image_rgb.shape[1]}x{image_rgb.shape[0]} does not match the intrinsics")
-    mask = ripe_mask(image_rgb, cfg)
-    every = _blobs(mask)
-    blobs = [b for b in every if b.area >= cfg.min_area_px]
-    if not blobs:
-        what = "red" if cfg.ripe_class in (None, "red") else f"ripe ({cfg.ripe_class} or riper)"
-        small = f"{what} blobs smaller than {cfg.min_area_px} px"
-        return NoDetection(f"no {what} blob" if not every else small)
     predicted = None
     if predicted_px is not None:
         predicted = np.asarray(predicted_px, dtype=float).reshape(-1)
         if predicted.shape != (2,) or not np.all(np.isfinite(predicted)):
             predicted = None
     f = intrinsics.focal_px
+    H, W = image_rgb.shape[:2]
     window_px = 0.0
+    x0, y0, x1, y1 = 0, 0, W, H  # the part of the image looked at
     if prediction is not None:
         m = np.asarray(prediction.p_camera, dtype=float)
         if m.shape != (3,) or not np.all(np.isfinite(m)) or m[0] <= 1e-3:
@@ -530,11 +550,25 @@ def detect(
         else:
             predicted = intrinsics.project(m)
             spread = float(np.sqrt(max(np.linalg.eigvalsh(prediction.cov_camera)[-1], 0.0)))
-            window_px = min(f * (3.0 * spread + fruit.radius_m * 1.2) / m[0] + 4.0, float(max(mask.shape)))
+            window_px = min(f * (3.0 * spread + fruit.radius_m * 1.2) / m[0] + 4.0, float(max(H, W)))
+            # the fruit the estimate allows and their neighbours lie within the window and two
+            # and a half radii around it: only that part of the image is segmented
+            half = window_px + 2.5 * f * fruit.radius_m * (1.0 + fruit.size_spread_rel * 3.0) / m[0] + 8.0
+            if np.all(np.isfinite(predicted)):
+                x0, y0 = max(int(predicted[0] - half), 0), max(int(predicted[1] - half), 0)
+                x1, y1 = min(int(predicted[0] + half) + 1, W), min(int(predicted[1] + half) + 1, H)
+                if x1 - x0 < 8 or y1 - y0 < 8:  # the window lies outside the image
+                    x0, y0, x1, y1 = 0, 0, W, H
+    mask = ripe_mask(image_rgb[y0:y1, x0:x1], cfg)
+    every = [_shifted(b, x0, y0) for b in _blobs(mask)]
+    blobs = [b for b in every if b.area >= cfg.min_area_px]
+    if not blobs:
+        what = "red" if cfg.ripe_class in (None, "red") else f"ripe ({cfg.ripe_class} or riper)"
+        small = f"{what} blobs smaller than {cfg.min_area_px} px"
+        return NoDetection(f"no {what} blob" if not every else small)
     target = _choose_blob(blobs, predicted)
     # ---- the fruit in and around that blob (and, with a prediction, in and around every
     # blob within its spread), each with its own outer arcs
-    H, W = mask.shape
     arcs: list[Arc] = []
     near = _nearby(every, target)
     if prediction is not None and predicted is not None:
@@ -546,7 +580,7 @@ def detect(
                     seen_ids.add(id(n))
     for k, b in enumerate(near):
         o = b.outline
-        usable = (o[:, 0] > 0) & (o[:, 0] < W - 1) & (o[:, 1] > 0) & (o[:, 1] < H - 1)
+        usable = (o[:, 0] > x0) & (o[:, 0] < x1 - 1) & (o[:, 1] > y0) & (o[:, 1] < y1 - 1)
         arcs += outline_arcs(o + 0.5, usable, k, corner_px=cfg.corner_px, margin=cfg.junction_margin)
     # a fruit that is not a sphere is not a circle in the image: its outline lies inside
     # the circle through its widest parts by up to the prior's shape spread (apparent
@@ -638,7 +672,7 @@ def detect(
     # arcs grouped into one fruit may not all be its own (a neighbour's arc that happens to
     # lie near its circle) or may be off together (shading along one side): the spread of
     # the fits that leave one arc out says how far the centre can be off
-    lat_jk, alpha_jk = _arc_jackknife(fit.rays, keep, arc_of, axis, alpha, cfg.min_boundary_points)
+    lat_jk, alpha_jk = _arc_jackknife(fit.rays, keep, arc_of, cfg.min_boundary_points)
     if lat_fit * f > cfg.max_fit_sigma_px + 0.25 * slack_px:
         return NoDetection(
             f"the visible arcs fix the target's centre only to {lat_fit * f:.1f} px (1 sigma): too little "
@@ -671,8 +705,12 @@ def detect(
         range_m=rho,
         p_camera=rho * axis,
         cov_camera=cov,
-        area_px=_area_inside(mask, centre, radius_px),
+        area_px=_area_inside(mask, centre - np.array([x0, y0]), radius_px),
         boundary_points=int(keep.sum()),
         trimmed_fraction=1.0 - float(keep.sum()) / max(outline_points, 1),
         arc_deg=arc,
+        centre_fit_px=f * lat_fit,
+        radius_fit_px=f * alpha_fit,
+        centre_jackknife_px=f * lat_jk,
+        radius_jackknife_px=f * alpha_jk,
     )

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-__all__ = ["SpheroidFit", "fit_spheroid", "grazing_residuals"]
+__all__ = ["SpheroidFit", "fit_spheroid", "grazing_jacobian", "grazing_residuals"]
 
 
 @dataclass(frozen=True)
@@ -62,12 +62,39 @@ class SpheroidFit:
             C = np.linalg.inv(info)[:3, :3]
         except np.linalg.LinAlgError:
             return math.inf, math.inf
+        return self._bearing_alpha_sigmas(C)
+
+    def _bearing_alpha_sigmas(self, C: np.ndarray) -> tuple[float, float]:
+        """1σ of the bearing across it (worse direction) and of α [rad] for a covariance C of p."""
         n = float(np.linalg.norm(self.p))
         a = self.p / n
         P = (np.eye(3) - np.outer(a, a)) / n  # d(axis)/dp
         g = -a / (n * n * math.sqrt(1.0 - 1.0 / (n * n)))  # dα/dp, α = asin(1/|p|)
         lateral = np.linalg.eigvalsh(P @ C @ P.T)
         return math.sqrt(max(float(lateral[-1]), 0.0)), math.sqrt(max(float(g @ C @ g), 0.0))
+
+
+def grazing_jacobian(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """∂(residual)/∂(p, ln k) of :func:`grazing_residuals`, (N, 4), in the Gauss-Newton
+    sense: dg / |∇⊥g| (the derivative of the Sampson scale, which multiplies g, vanishes on
+    the silhouette and is left out). With q = Ap, c = pᵀAp - 1, β = bᵀq, γ = bᵀAb:
+    ∂g/∂p = 2β Ab - 2γ q; with dA/d(ln k) = -(2/k²) u uᵀ, u_b = uᵀb, u_p = uᵀp:
+    ∂g/∂ln k = -(2/k²)(2β u_b u_p - c u_b² - γ u_p²)."""
+    k2 = shape_index**2
+    A = np.eye(3) + (1.0 / k2 - 1.0) * np.outer(up, up)
+    q = A @ p
+    c = float(p @ q) - 1.0
+    beta = rays @ q
+    Ab = rays @ A
+    gamma = np.einsum("ij,ij->i", rays, Ab)
+    grad = 2.0 * (beta[:, None] * q[None, :] - c * Ab)
+    grad -= np.einsum("ij,ij->i", grad, rays)[:, None] * rays
+    norm = np.maximum(np.linalg.norm(grad, axis=1), 1e-12)
+    ub, upp = rays @ up, float(up @ p)
+    J = np.empty((len(rays), 4))
+    J[:, :3] = 2.0 * (beta[:, None] * Ab - gamma[:, None] * q[None, :])
+    J[:, 3] = -(2.0 / k2) * (2.0 * beta * ub * upp - c * ub**2 - gamma * upp**2)
+    return J / norm[:, None]
 
 
 def grazing_residuals(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray) -> np.ndarray:
@@ -108,8 +135,15 @@ def fit_spheroid(
         r = grazing_residuals(x[:3], math.exp(x[3]), up, rays) / scale_rad
         return np.append(r, prior_w * (x[3] - math.log(shape_index0)))
 
+    prior_row = np.array([[0.0, 0.0, 0.0, prior_w]])
+
+    def jacobian(x: np.ndarray) -> np.ndarray:
+        return np.vstack([grazing_jacobian(x[:3], math.exp(x[3]), up, rays) / scale_rad, prior_row])
+
     try:
-        sol = least_squares(residuals, x0, loss="soft_l1", f_scale=1.0, x_scale="jac", max_nfev=60)
+        sol = least_squares(
+            residuals, x0, jac=jacobian, loss="soft_l1", f_scale=1.0, x_scale="jac", max_nfev=60
+        )
     except (ValueError, np.linalg.LinAlgError):
         return None
     p, k = sol.x[:3], math.exp(float(sol.x[3]))

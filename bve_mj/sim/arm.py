@@ -157,6 +157,9 @@ def arm_spec(kin: ArmKinematics, camera: CameraConfig | None = None) -> mujoco.M
 
     spec.visual.global_.offwidth = max(camera.width_px, 640)
     spec.visual.global_.offheight = max(camera.height_px, 480)
+    # no multisampling: on a CPU renderer it doubles a frame's cost; the camera's own blur
+    # (camera.blur_sigma_px, applied by the renderer) softens the edges instead
+    spec.visual.quality.offsamples = 0
 
     key = spec.add_key(name="home")
     key.qpos = list(kin.home)

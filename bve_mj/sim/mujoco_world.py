@@ -18,7 +18,8 @@ import numpy as np
 
 from bve_mj.config import FruitPrior, MeasurementConfig, Settings
 from bve_mj.estimation.belief import Belief
-from bve_mj.estimation.models import CameraModel, RangeModel
+from bve_mj.estimation.models import BearingSizeModel, CameraModel, RangeModel, SizeModel
+from bve_mj.estimation.noise import NoiseModel, load_noise_model, measure
 from bve_mj.perception.detector import Detection, NoDetection, Prediction, detect
 from bve_mj.planning.plan import ViewPlan
 from bve_mj.robot.ik import look_at_ik
@@ -77,6 +78,7 @@ class _Last:
     q: np.ndarray | None = None
     q_encoders: np.ndarray | None = None
     image: np.ndarray | None = None
+    measurement: tuple[np.ndarray, np.ndarray] | None = None  # z and its covariance as fused
     timings: ViewTimings = field(default_factory=ViewTimings)
 
 
@@ -92,6 +94,8 @@ class MujocoWorld:
         rng: seeds the sensor noise and the calibration error.
         keep_images: keep the last eye-in-hand image (for videos).
         on_step: called with the simulation time after every physics step of a move.
+        noise: the detector's calibrated noise when the radius is in the state (default:
+            loaded from ``measurement.noise_model``).
     """
 
     def __init__(
@@ -106,6 +110,7 @@ class MujocoWorld:
         *,
         keep_images: bool = False,
         on_step: Callable[[float], None] | None = None,
+        noise: NoiseModel | None = None,
     ) -> None:
         self.settings, self.kin, self.model, self.info = settings, kin, model, info
         self.data = mujoco.MjData(model)
@@ -119,10 +124,20 @@ class MujocoWorld:
         self.controller.hold(q_start)
         mujoco.mj_forward(model, self.data)
         cam = settings.camera
-        self.renderer = OffscreenRenderer(model, cam.width_px, cam.height_px, shadows=settings.scene.shadows)
+        self.renderer = OffscreenRenderer(
+            model,
+            cam.width_px,
+            cam.height_px,
+            shadows=settings.scene.shadows,
+            blur_sigma_px=cam.blur_sigma_px,
+        )
         self._rng = rng
         self.intrinsics = calibrated_intrinsics(cam, settings.sensor, rng)
         self.measurement, self.fruit_prior = declared_noise(settings)
+        self.noise = noise
+        if noise is None and settings.filter.state == "centre_radius":
+            self.noise = load_noise_model(settings.measurement.noise_model)
+            self.noise.check_camera(cam, settings.measurement.noise_model)
         self._target = np.asarray(target, dtype=float).copy()
         self._keep_images = keep_images
         self._on_step = on_step
@@ -193,7 +208,8 @@ class MujocoWorld:
         self.last.q, self.last.q_encoders = self.q, q_enc
         s = self.settings
         if belief is not None:  # the estimate picks its fruit among those in view, in 3-D
-            prediction = Prediction(R.T @ (belief.mean - p), R.T @ belief.cov @ R)
+            b = belief.position
+            prediction = Prediction(R.T @ (b.mean - p), R.T @ b.cov @ R)
             det = detect(
                 image, self.intrinsics, self.fruit_prior, self.measurement, s.detector,
                 prediction=prediction, up_camera=R.T[:, 2],
@@ -209,6 +225,14 @@ class MujocoWorld:
             self.last.image = image
         if not isinstance(det, Detection):
             return None
+        if self.noise is not None:  # the radius in the state: what the detector measures
+            z, cov = measure(det, self.noise, s.fruit.shape_index, self.intrinsics.focal_px)
+            # encoder noise turns the camera (about 6 joints' errors): a white bearing error
+            cov[:2, :2] += np.eye(2) * (2.5 * s.sensor.encoder_noise_rad) ** 2
+            self.last.measurement = (z, cov)
+            if s.measurement.kind in ("camera", "auto"):
+                return Observation(z, BearingSizeModel(p, R, cov))
+            return Observation(z[2:], SizeModel(p, float(cov[2, 2])))
         if s.measurement.kind in ("camera", "auto"):  # auto: the camera here
             return Observation(det.p_camera, CameraModel(p, R, det.cov_camera))
         var = float(det.bearing_camera @ det.cov_camera @ det.bearing_camera)
@@ -233,12 +257,19 @@ class MujocoWorld:
             out["detection"] = {
                 "centre_px": det.centre_px.tolist(),
                 "radius_px": det.radius_px,
+                "bearing_camera": det.bearing_camera.tolist(),
+                "angular_radius_rad": det.angular_radius_rad,
                 "range_m": det.range_m,
                 "p_camera_m": det.p_camera.tolist(),
                 "cov_camera_m2": det.cov_camera.tolist(),
                 "trimmed_fraction": det.trimmed_fraction,
                 "arc_deg": det.arc_deg,
+                "centre_fit_px": det.centre_fit_px,
+                "radius_fit_px": det.radius_fit_px,
             }
+            if last.measurement is not None:  # the radius in the state: (u, v, α) and R as fused
+                z, cov = last.measurement
+                out["measurement"] = {"z": z.tolist(), "cov": cov.tolist()}
         elif isinstance(det, NoDetection):
             out["detection"] = {"none": det.reason}
             if det.ambiguous:

@@ -83,6 +83,7 @@ class OffscreenRenderer:
         width, height: image size [px].
         shadows: shadows cost about 10x per frame on a CPU renderer; off by default.
         hidden_groups: geom groups not drawn (the arm's geoms are group 2).
+        blur_sigma_px: a Gaussian blur of every image (a camera's point spread; 0: none).
     """
 
     def __init__(
@@ -93,6 +94,7 @@ class OffscreenRenderer:
         *,
         shadows: bool = False,
         hidden_groups: tuple[int, ...] = (),
+        blur_sigma_px: float = 0.0,
     ) -> None:
         if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
             raise RenderError(
@@ -114,6 +116,17 @@ class OffscreenRenderer:
         self._viewport = mujoco.MjrRect(0, 0, width, height)
         self._rgb = np.empty((height, width, 3), dtype=np.uint8)
         self.width, self.height = width, height
+        self._blur = float(blur_sigma_px)
+
+    def _finish(self) -> np.ndarray:
+        """The pixels read back, upright, with the camera's blur."""
+        mujoco.mjr_readPixels(self._rgb, None, self._viewport, self._ctx)
+        image = np.flipud(self._rgb)
+        if self._blur > 0.0:
+            import cv2
+
+            return cv2.GaussianBlur(image, (0, 0), self._blur)
+        return image.copy()
 
     def render(self, data: mujoco.MjData, camera: str | int) -> np.ndarray:
         """The image of ``camera`` (name or id) for the current ``data`` (kinematics done)."""
@@ -124,8 +137,7 @@ class OffscreenRenderer:
             self._model, data, self._option, None, self._camera, mujoco.mjtCatBit.mjCAT_ALL, self._scene
         )
         mujoco.mjr_render(self._viewport, self._scene, self._ctx)
-        mujoco.mjr_readPixels(self._rgb, None, self._viewport, self._ctx)
-        return np.flipud(self._rgb).copy()
+        return self._finish()
 
     def render_free(
         self,
@@ -149,8 +161,7 @@ class OffscreenRenderer:
         if decorate is not None:
             decorate(self._scene)
         mujoco.mjr_render(self._viewport, self._scene, self._ctx)
-        mujoco.mjr_readPixels(self._rgb, None, self._viewport, self._ctx)
-        return np.flipud(self._rgb).copy()
+        return self._finish()
 
     def close(self) -> None:
         """Free the GL resources (also done when the renderer is garbage-collected).
