@@ -27,8 +27,7 @@ def _one(args: tuple[str, str, int]) -> tuple[str, str, int, float, float, int, 
     planner, measurement, seed = args
     s = with_overrides(Settings(), measurement={"kind": measurement}, planner={"kind": planner})
     ep = run_mujoco_episode(s, seed)
-    d = ep.result.final.mean - ep.truth
-    nees = float(d @ np.linalg.solve(ep.result.final.cov, d))
+    nees = ep.result.final.mahalanobis_sq(ep.truth)
     return planner, measurement, seed, ep.final_error_mm, nees, len(ep.result.views), ep.result.outcome
 
 

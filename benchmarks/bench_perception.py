@@ -43,7 +43,9 @@ def _leaf_table(kin: ArmKinematics, s: Settings, intr: Intrinsics, target: Fruit
     model = spec.compile()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
-    renderer = OffscreenRenderer(model, s.camera.width_px, s.camera.height_px, hidden_groups=(2,))
+    renderer = OffscreenRenderer(
+        model, s.camera.width_px, s.camera.height_px, hidden_groups=(2,), blur_sigma_px=s.camera.blur_sigma_px
+    )
     leaf = model.body("leaf_body").mocapid[0]
     rng = np.random.default_rng(0)
 
@@ -137,7 +139,9 @@ def _touching_table(kin: ArmKinematics, s: Settings, intr: Intrinsics) -> None:
     )
     model = spec.compile()
     data = mujoco.MjData(model)
-    renderer = OffscreenRenderer(model, s.camera.width_px, s.camera.height_px, hidden_groups=(2,))
+    renderer = OffscreenRenderer(
+        model, s.camera.width_px, s.camera.height_px, hidden_groups=(2,), blur_sigma_px=s.camera.blur_sigma_px
+    )
     counts: dict[tuple[float, str], Counter[str]] = defaultdict(Counter)
     reasons: Counter[str] = Counter()
     t_detect = []
@@ -232,7 +236,13 @@ def main() -> None:
         model = spec.compile()
         data = mujoco.MjData(model)
         mujoco.mj_forward(model, data)
-        r = OffscreenRenderer(model, s.camera.width_px, s.camera.height_px, shadows=shadows)
+        r = OffscreenRenderer(
+            model,
+            s.camera.width_px,
+            s.camera.height_px,
+            shadows=shadows,
+            blur_sigma_px=s.camera.blur_sigma_px,
+        )
         r.render(data, CAMERA_NAME)
         t_render, t_detect = [], []
         for _ in range(20):

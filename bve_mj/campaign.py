@@ -36,6 +36,7 @@ import numpy as np
 from bve_mj.config import Settings, settings_to_dict
 from bve_mj.episode import EpisodeResult
 from bve_mj.errors import BveError, ConfigError
+from bve_mj.estimation.belief import Belief
 from bve_mj.experiments import EXPERIMENTS, for_robot, synthetic_episode, with_overrides
 from bve_mj.robot import arm_kinematics
 
@@ -234,11 +235,12 @@ def _row(
     result: EpisodeResult,
     ep_seed: int | None,
     joint_violation_rad: float = 0.0,
+    true_radius_m: float | None = None,
 ) -> dict[str, Any]:
-    final = result.final
+    final = result.final.position
     d = final.mean - truth
     planned = result.views[1:]
-    errors = [float(np.linalg.norm(v.belief.mean - truth)) * 1e3 for v in result.views]
+    errors = [float(np.linalg.norm(v.belief.centre_m - truth)) * 1e3 for v in result.views]
     finite = all(
         np.all(np.isfinite(v.belief.mean)) and np.all(np.isfinite(v.belief.cov)) for v in result.views
     )
@@ -274,11 +276,24 @@ def _row(
         "truth_m": truth.tolist(),
         "estimate_m": final.mean.tolist(),
         "cov_m2": final.cov.tolist(),
-        "prior_m": result.prior.mean.tolist(),
+        "prior_m": result.prior.centre_m.tolist(),
         "error_by_view_mm": errors,
         "camera_path_m": [v.p_world_camera.tolist() for v in result.views],
-        "estimate_path_m": [v.belief.mean.tolist() for v in result.views],
+        "estimate_path_m": [v.belief.centre_m.tolist() for v in result.views],
+        **radius_metrics(result.final, true_radius_m),
     }
+
+
+def radius_metrics(final: Belief, true_radius_m: float | None) -> dict[str, float | None]:
+    """The final radius estimate, its σ, its error [mm] and NEES (None where the state holds
+    no radius or the truth is unknown)."""
+    r, sd = final.radius_m, final.radius_sigma_m
+    if r is None or sd is None or true_radius_m is None:
+        return {"radius_mm": r and 1e3 * r, "radius_sigma_mm": sd and 1e3 * sd, "radius_error_mm": None,
+                "radius_nees": None}  # fmt: skip
+    err = r - true_radius_m
+    return {"radius_mm": 1e3 * r, "radius_sigma_mm": 1e3 * sd, "radius_error_mm": 1e3 * err,
+            "radius_nees": (err / sd) ** 2}  # fmt: skip
 
 
 def run_cell(settings: Settings, cell: Cell, seed: int, run: int) -> dict[str, Any]:
@@ -304,7 +319,16 @@ def run_cell(settings: Settings, cell: Cell, seed: int, run: int) -> dict[str, A
                 qa = np.asarray(q)
                 below, above = kin.limits.lower - qa, qa - kin.limits.upper
                 violation = max(violation, float(np.max(np.maximum(below, above))))
-        return _row(cell, run, seed, episode.truth, episode.result, ep_seed, max(violation, 0.0))
+        return _row(
+            cell,
+            run,
+            seed,
+            episode.truth,
+            episode.result,
+            ep_seed,
+            max(violation, 0.0),
+            episode.true_radius_m,
+        )
     except BveError as exc:
         return _failed_row(cell, seed, run, "failed", str(exc))
 

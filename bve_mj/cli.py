@@ -79,6 +79,7 @@ def _build_parser() -> argparse.ArgumentParser:
         "--measurement", default=None, help="range (the paper's EKF) or camera (default from settings: range)"
     )
     paper.add_argument("--planner", default=None, help="bve, random or circle")
+    paper.add_argument("--filter", default=None, help="ekf or ukf (default from settings: ekf)")
     paper.add_argument("--planning-model", default=None, help="paper or consistent")
     paper.add_argument("--optimiser", default=None, help="slsqp or trust-constr")
     paper.add_argument("--robot", default=None, help="arm for E5/E10: manipulator_h, ur5 or panda")
@@ -102,6 +103,13 @@ def _build_parser() -> argparse.ArgumentParser:
         "--measurement", default=None, help="camera or range (default from settings: camera here)"
     )
     ep.add_argument("--planner", default=None, help="bve, random or circle")
+    ep.add_argument("--filter", default=None, help="ekf or ukf (default from settings: ekf)")
+    ep.add_argument(
+        "--state",
+        default=None,
+        help="centre (the paper's: range from the size with the prior's radius) or centre_radius "
+        "(the radius estimated too; default here)",
+    )
     ep.add_argument("--planning-model", default=None, help="paper or consistent")
     ep.add_argument("--robot", default=None, help="manipulator_h, ur5 or panda")
     ep.add_argument("--approach", action="store_true", help="approach mode: end close to the fruit")
@@ -179,10 +187,36 @@ def _build_parser() -> argparse.ArgumentParser:
     sc.add_argument(
         "--measurement", default=None, help="camera or range for every scenario (default: each file's)"
     )
+    sc.add_argument("--filter", default=None, help="ekf or ukf for every scenario (default: each file's)")
+    sc.add_argument(
+        "--state", default=None, help="centre or centre_radius for every scenario (default: each file's)"
+    )
     sc.add_argument("--dir", default=None, help="a folder of scenario TOML files instead of the suite")
     sc.add_argument("--workers", default=None, help="local processes (default: all cores)")
     sc.add_argument("--json", default=None, help="write per-scenario metrics and episode rows here")
+    sc.add_argument(
+        "--plot",
+        default=None,
+        help="write the consistency plot (share inside the p-ellipsoid against p) here",
+    )
     sc.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    cal = sub.add_parser(
+        "calibrate",
+        help="render the detector against ground truth and fit its noise model (the filter's R)",
+        description="Views of the suite's scenes from poses the arm reaches, detected and compared with "
+        "the truth; the fitted noise model is written as JSON (set measurement.noise_model to it).",
+    )
+    cal.add_argument(
+        "--out", default="noise_model.json", help="the noise model file (default noise_model.json)"
+    )
+    cal.add_argument("--only", default=None, help="comma-separated scenario names (default: all)")
+    cal.add_argument("--dir", default=None, help="a folder of scenario TOML files instead of the suite")
+    cal.add_argument("--scenes", default="8", help="seeded scenes per scenario (default 8)")
+    cal.add_argument("--views", default="25", help="views per scene (default 25)")
+    cal.add_argument("--seed", default="1", help="base seed (default 1: not the suite's 0)")
+    cal.add_argument("--workers", default=None, help="local processes (default: all cores)")
+    cal.add_argument("--json", default=None, help="write every view's detection and error here")
+    cal.add_argument("--quiet", action="store_true", help="no progress on stderr")
     res = sub.add_parser(
         "results",
         help="run (or resume) the results campaigns and write docs/results.md with its figures",
@@ -312,6 +346,7 @@ def paper_settings(args: argparse.Namespace) -> Settings:
     settings = with_overrides(
         settings,
         measurement=_given(kind=args.measurement),
+        filter=_given(kind=args.filter),
         planner=_given(kind=args.planner, planning_model=args.planning_model, optimiser=args.optimiser),
         protocol=_given(steps=_int_arg("steps", args.steps, 1)),
         robot=_given(name=args.robot, joint_limits=args.joint_limits, formulation=args.formulation),
@@ -337,6 +372,7 @@ def episode_cli_settings(args: argparse.Namespace) -> Settings:
         ),
         planner=_given(kind=args.planner, planning_model=args.planning_model),
         measurement=_given(kind=args.measurement),
+        filter=_given(kind=args.filter, state=args.state),
         robot=_given(name=args.robot),
     )
     if args.realistic:
@@ -442,31 +478,44 @@ def _cmd_episode(args: argparse.Namespace) -> int:
     finally:
         frames = recorder.close() if recorder is not None else 0
     doc = result.to_json()
-    e = result.settings.episode
+    s = result.settings
+    e = s.episode
     print(
         f"bve-mj episode: seed {seed}, {e.experiment} ({'approach' if e.approach else 'localise'}), "
-        f"measurement={result.settings.measurement.kind}, planner={result.settings.planner.kind}, "
-        f"robot={result.settings.robot.name}; target r = {1e3 * result.info.target.radius_m:.1f} mm"
+        f"measurement={s.measurement.kind}, filter={s.filter.kind}, state={s.filter.state}, "
+        f"planner={s.planner.kind}, robot={s.robot.name}; target r = {1e3 * result.true_radius_m:.1f} mm"
     )
     if not args.quiet:
         print(
             f"{'view':>4} {'plan':>13} {'detection':>22} {'measured':>8} {'true':>6} "
-            f"{'error':>8} {'σmax':>7}\n{'':>4} {'':>13} {'':>22} {'range m':>8} {'range m':>6} "
-            f"{'mm':>8} {'mm':>7}"
+            f"{'error':>8} {'σmax':>7} {'radius':>14}\n{'':>4} {'':>13} {'':>22} {'range m':>8} "
+            f"{'range m':>6} {'mm':>8} {'mm':>7} {'mm':>14}"
         )
         for v, rec in zip(doc["views"], result.result.views, strict=True):
             det = v.get("detection", {})
             shown = f"r {det['radius_px']:.1f} px" if "radius_px" in det else str(det.get("none", "-"))[:22]
-            measured = f"{det['range_m']:8.3f}" if "range_m" in det else f"{'-':>8}"
-            sig = 1e3 * float(np.sqrt(np.linalg.eigvalsh(rec.belief.cov)[-1]))
+            r, sd = rec.belief.radius_m, rec.belief.radius_sigma_m
+            rho = (
+                None
+                if "angular_radius_rad" not in det
+                else (r or s.fruit.radius_m) / math.sin(det["angular_radius_rad"])
+            )
+            measured = f"{rho:8.3f}" if rho is not None else f"{'-':>8}"
+            radius = f"{1e3 * r:6.2f} ± {1e3 * sd:5.2f}" if r is not None and sd is not None else "-"
             true_range = float(np.linalg.norm(rec.p_world_camera - result.truth))
             print(
                 f"{v['view']:>4} {v['plan_status'] or 'start'!s:>13} {shown:>22} {measured} "
-                f"{true_range:6.3f} {v['error_mm']:8.2f} {sig:7.2f}"
+                f"{true_range:6.3f} {v['error_mm']:8.2f} {1e3 * rec.belief.sigma_max_m:7.2f} {radius:>14}"
             )
+    radius = ""
+    if doc["final_radius_mm"] is not None:
+        radius = (
+            f"; radius {doc['final_radius_mm']:.2f} ± {doc['final_radius_sigma_mm']:.2f} mm "
+            f"(error {doc['radius_error_mm']:+.2f} mm)"
+        )
     print(
         f"outcome: {doc['outcome']}; final error {doc['final_error_mm']:.2f} mm "
-        f"(NEES {doc['final_nees']:.2f}) after {len(doc['views'])} views; wall {doc['wall_s']:.2f} s"
+        f"(NEES {doc['final_nees']:.2f}){radius} after {len(doc['views'])} views; wall {doc['wall_s']:.2f} s"
     )
     print("median per view: " + _stage_times(doc["views"][1:]))
     counts = result.result.event_counts()
@@ -607,26 +656,50 @@ def _cmd_results(args: argparse.Namespace) -> int:
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
     from bve_mj.errors import ConfigError
+    from bve_mj.metrics import consistency_curve
     from bve_mj.scenarios import format_suite, load_suite, run_suite, suite_json
 
     seeds = _int_arg("seeds", args.seeds, 1) or 1
     seed = _int_arg("seed", args.seed, 0) or 0
     workers = _int_arg("workers", args.workers, 1)
     json_path = _check_output_path("json", args.json)
+    plot_path = _check_output_path("plot", args.plot)
+    if plot_path is not None:
+        if plot_path.suffix.lower() != ".png":
+            raise ConfigError("plot", args.plot, "a path ending in .png")
+        from bve_mj.plots import require_matplotlib
+
+        require_matplotlib("plot", args.plot)
     if args.measurement is not None and args.measurement not in ("camera", "range"):
         raise ConfigError("measurement", args.measurement, "camera or range")
     suite = load_suite(args.dir, args.only.split(",") if args.only is not None else None)
     print(
         f"bve-mj scenarios: {len(suite)} scenarios x {seeds} seeds (base seed {seed}), measurement "
-        f"{args.measurement or 'from each file'}"
+        f"{args.measurement or 'from each file'}, filter {args.filter or 'from each file'}, state "
+        f"{args.state or 'from each file'}"
     )
     show = not args.quiet and sys.stderr.isatty()
     result = run_suite(
-        suite, seeds=seeds, seed=seed, measurement=args.measurement, workers=workers, progress=_progress(show)
-    )
-    for line in format_suite({sc.name: result.summary(sc.name) for sc in result.scenarios}):
+        suite, seeds=seeds, seed=seed, measurement=args.measurement, filter_kind=args.filter,
+        state=args.state, workers=workers, progress=_progress(show),
+    )  # fmt: skip
+    summaries = {sc.name: result.summary(sc.name) for sc in result.scenarios}
+    for line in format_suite(summaries):
         print(line)
     print(f"wall time {result.wall_s:.1f} s")
+    if plot_path is not None:
+        from bve_mj.plots import plot_consistency
+
+        curves = {name: s["consistency"] for name, s in summaries.items()}
+        curves["all"] = consistency_curve(
+            [r["nees"] for rows in result.rows.values() for r in rows if "nees" in r]
+        )
+        any_settings = next(iter(result.settings.values()))
+        title = (
+            f"bve-mj scenarios, {result.seeds} seeds: {any_settings.measurement.kind} measurement, "
+            f"{any_settings.filter.kind.upper()}, state {any_settings.filter.state}"
+        )
+        print(f"wrote {plot_consistency(curves, plot_path, title)}")
     if json_path is not None:
         write_json_atomic(json_path, suite_json(result))
         print(f"wrote {json_path}")
@@ -635,6 +708,55 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
         for line in result.crashed[:5]:
             print(f"  {line}", file=sys.stderr)
         return EXIT_FAILURE
+    return EXIT_OK
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from bve_mj.calibration import calibrate
+    from bve_mj.errors import ConfigError
+    from bve_mj.scenarios import load_suite
+
+    scenes = _int_arg("scenes", args.scenes, 1) or 1
+    views = _int_arg("views", args.views, 1) or 1
+    seed = _int_arg("seed", args.seed, 0) or 0
+    workers = _int_arg("workers", args.workers, 1)
+    out = _check_output_path("out", args.out)
+    assert out is not None
+    if out.suffix.lower() != ".json":
+        raise ConfigError("out", args.out, "a path ending in .json")
+    json_path = _check_output_path("json", args.json)
+    suite = load_suite(args.dir, args.only.split(",") if args.only is not None else None)
+    print(f"bve-mj calibrate: {len(suite)} scenarios x {scenes} scenes x {views} views (base seed {seed})")
+    show = not args.quiet and sys.stderr.isatty()
+    model, report, data = calibrate(
+        suite, scenes=scenes, views=views, seed=seed, workers=workers, progress=_progress(show)
+    )
+    print(
+        f"{report['views']} views rendered, {report['refused']} refused, {report['detections']} fitted, "
+        f"{report['gross_errors']} gross errors (> 6σ: the wrong fruit; left to the filter's gate)"
+    )
+    for name, coef in (("centre", model.centre_var_px2), ("radius", model.radius_var_px2)):
+        r = report[name]
+        terms = " + ".join(
+            f"{c:.4g}·{f}" for c, f in zip(coef, ("1", "fit²", "partial²", "elongation²"), strict=True)
+        )
+        print(
+            f"{name:6} variance [px²] = {terms}; error rms {r['error_rms_px']:.3f} px, normalised rms "
+            f"{r['z_rms']:.2f}, beyond 2σ {r['beyond_2sigma_pct']:.1f}% (Gaussian 4.6), beyond 3σ "
+            f"{r['beyond_3sigma_pct']:.2f}% (0.27)"
+        )
+    b0, b1 = model.radius_bias_px
+    print(f"apparent radius bias {b0:+.3f} {b1:+.3f}·r_px/100 px (removed from every measurement)")
+    h, v = model.centre_bias_rel
+    print(
+        f"the fruit's own centre offset: σ {100 * h:.2f}% of its radius horizontally, {100 * v:.2f}% "
+        "vertically (added to the centre's covariance)"
+    )
+    write_json_atomic(out, model.to_json())
+    print(f'wrote {out} (wall {data.wall_s:.0f} s); use it with [measurement] noise_model = "{out}"')
+    if json_path is not None:
+        write_json_atomic(json_path, {"model": model.to_json(), "report": report, "rows": list(data.rows)})
+        print(f"wrote {json_path}")
     return EXIT_OK
 
 
@@ -671,6 +793,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return _cmd_results(args)
             if args.command == "scenarios":
                 return _cmd_scenarios(args)
+            if args.command == "calibrate":
+                return _cmd_calibrate(args)
         raise _UsageError(f"bve-mj: unknown command {args.command!r}")  # pragma: no cover
     except _UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -12,12 +12,11 @@ import numpy as np
 
 from bve_mj.config import FilterConfig
 from bve_mj.errors import BveError, EstimationError
-from bve_mj.estimation.belief import Belief
-from bve_mj.estimation.ekf import predict, update
+from bve_mj.estimation import Belief, UpdateResult, filter_update, predict
 from bve_mj.planning.plan import LearnsFromFailedViews, Planner, PlanStatus, ViewPlan
 from bve_mj.sim.world import Observation, World
 
-__all__ = ["EpisodeResult", "StopRules", "ViewRecord", "run_episode", "supported"]
+__all__ = ["Claims", "EpisodeResult", "StopRules", "ViewRecord", "run_episode", "supported"]
 
 
 @dataclass(frozen=True)
@@ -47,7 +46,8 @@ class StopRules:
     """When an episode ends before its last view.
 
     Attributes:
-        sigma_m: the largest posterior standard deviation falls below this ("converged").
+        sigma_m: the largest posterior standard deviation falls below this ("converged"), with
+            at least ``min_accepted`` accepted measurements since the last belief reset.
         stable_m: the estimate moves less than this over ``stable_views`` views, each with an
             accepted measurement ("stable"; a gated-out view does not count as agreement).
         approach_distance_m: the camera is this close to the estimate ("approached").
@@ -60,6 +60,7 @@ class StopRules:
     """
 
     sigma_m: float | None = None
+    min_accepted: int = 1
     stable_m: float | None = None
     stable_views: int = 3
     approach_distance_m: float | None = None
@@ -79,18 +80,29 @@ class StopRules:
             < self.stall_m
         )
         if self.approach_distance_m is not None:
-            if np.linalg.norm(views[-1].p_world_camera - b.mean) <= self.approach_distance_m:
+            if np.linalg.norm(views[-1].p_world_camera - b.centre_m) <= self.approach_distance_m:
                 return "approached"
             return "approach_blocked" if stalled else None
-        if self.sigma_m is not None and np.sqrt(np.linalg.eigvalsh(b.cov)[-1]) <= self.sigma_m:
+        if (
+            self.sigma_m is not None
+            and b.sigma_max_m <= self.sigma_m
+            and _accepted_since_reset(views) >= self.min_accepted
+        ):
             return "converged"
         if self.stable_m is not None and len(views) > n and all(v.accepted for v in views[-n:]):
             moves = [
-                np.linalg.norm(views[-i].belief.mean - views[-i - 1].belief.mean) for i in range(1, n + 1)
+                np.linalg.norm(views[-i].belief.centre_m - views[-i - 1].belief.centre_m)
+                for i in range(1, n + 1)
             ]
             if max(moves) <= self.stable_m:
                 return "stable"
         return "stalled" if stalled else None
+
+
+def _accepted_since_reset(views: Sequence[ViewRecord]) -> int:
+    """Accepted measurements since the last belief reset (the reset's own view counts)."""
+    start = max((k for k, v in enumerate(views) if "belief_reset" in v.events), default=0)
+    return sum(v.accepted for v in views[start:])
 
 
 def _planned_move(view: ViewRecord) -> bool:
@@ -130,12 +142,17 @@ def run_episode(
     steps: int,
     stop: StopRules | None = None,
     on_view: Callable[[ViewRecord], None] | None = None,
+    claims: Claims | None = None,
 ) -> EpisodeResult:
     """Observe from the start pose, then up to ``steps`` times: plan, move, predict, observe,
     update; ``stop`` may end it early. Outcome: the rule that ended it, "max_views", or
     "never_detected" when no view measured the fruit ("ambiguous" when some view saw more
     than one fruit the estimate allows, event ``ambiguous``); "unreliable" instead when the
-    final estimate is not supported by the measurements (:func:`supported`).
+    final estimate is not supported by the measurements (:func:`supported`), or when two
+    measurements it gated out agree on another answer (:func:`_contested`).
+
+    ``claims``: what the views record (and the stop rules test) beside the filter's own
+    belief, which the planner plans with (see :class:`Claims`); None: the filter's belief.
 
     A planner that fails (raises a :class:`BveError`, a numerical error, or returns a
     non-finite point) does not end the episode: the camera holds where it is, looking at the
@@ -148,15 +165,18 @@ def run_episode(
     t0 = time.perf_counter()
     Q = np.eye(3) * filter_config.process_sigma_m**2
     gate = filter_config.gate_probability
+    update = filter_update(filter_config.kind, filter_config.ekf_iterations)
     belief = prior
     views: list[ViewRecord] = []
 
     sync = getattr(planner, "set_configuration", None)
     rejected: list[Observation] = []  # gated-out measurements since the last accepted one
+    contested: list[Observation] = []  # gated-out measurements since the last belief reset
+    innovations: list[tuple[float, int]] = []  # (NIS, dimension) of the accepted, since a reset
 
     def fuse(i: int, status: PlanStatus | None, feasible: bool, plan_s: float, events: list[str]) -> None:
         nonlocal belief
-        looked_at = belief.mean
+        looked_at = belief.centre_m
         obs = world.observe(belief)
         measured, accepted, nis = obs is not None, False, float("nan")
         if obs is not None:
@@ -168,11 +188,14 @@ def run_episode(
                     n = filter_config.reset_after_rejections
                     rejected.append(obs)
                     del rejected[: -2 * n]  # the last 2n rejected measurements
-                    reset = _reopen(prior, rejected, n, gate)
+                    contested.append(obs)
+                    del contested[: -2 * n]
+                    reset = _reopen(prior, rejected, n, gate, update)
                     if reset is not None:  # the belief had locked onto something wrong
                         events.append("belief_reset")
                         result = dataclasses.replace(result, belief=reset, accepted=True)
                         rejected.clear()
+                        contested.clear()
             except EstimationError as exc:
                 raise EstimationError(f"view {i}: {exc}; the episode stops here") from None
             belief, accepted, nis = result.belief, result.accepted, result.nis
@@ -181,9 +204,14 @@ def run_episode(
             events += [str(e) for e in (*info.get("events", []), *info.get("faults", []))]
             if info.get("ik_failed") and "ik_failure" not in events:
                 events.append("ik_failed")
+        if accepted:
+            innovations.append((nis, np.size(obs.z) if obs is not None else 0))
+        if "belief_reset" in events:
+            innovations[:] = innovations[-1:]
+        claimed = belief if claims is None else claims.claim(belief, innovations)
         views.append(
             ViewRecord(
-                i, world.p_world_camera, status, feasible, plan_s, measured, accepted, nis, belief, info,
+                i, world.p_world_camera, status, feasible, plan_s, measured, accepted, nis, claimed, info,
                 tuple(events),
             )
         )  # fmt: skip
@@ -210,11 +238,47 @@ def run_episode(
         outcome = "ambiguous" if ambiguous else "never_detected"
     elif outcome is None:
         outcome = "max_views"
-    if outcome not in ("never_detected", "ambiguous") and not supported(
-        views, filter_config.reset_after_rejections
+    if outcome not in ("never_detected", "ambiguous") and (
+        not supported(views, filter_config.reset_after_rejections)
+        or _contested(prior, belief, contested, gate, update)
     ):
         outcome = "unreliable"
     return EpisodeResult(prior, tuple(views), time.perf_counter() - t0, outcome)
+
+
+@dataclass(frozen=True)
+class Claims:
+    """What an episode claims beside its filter's belief: what no measurement model holds.
+
+    Attributes:
+        centre_offset_cov: (3, 3) the covariance of an offset every measurement of this fruit
+            shares (the detector's fruit-specific error, :meth:`bve_mj.estimation.noise.
+            NoiseModel.centre_bias_cov`): no view reduces it, so the filter fuses the measured
+            centre and the claim adds it to the centre's covariance.
+        innovation_prior_dof: when set, the claimed covariance is scaled by
+            s² = (ν₀ + Σ NIS) / (ν₀ + Σ m) over the measurements accepted since the last
+            reset (m each's dimension): the noise of this fruit's views as its innovations
+            tell it, against the model's (s² = 1 a priori, worth ν₀ degrees of freedom). A
+            fruit whose views disagree more than the noise model says (a hard silhouette:
+            elongated, in a cluster) claims less; one whose views agree better, more.
+    """
+
+    centre_offset_cov: np.ndarray | None = None
+    innovation_prior_dof: float | None = None
+
+    def scale(self, innovations: Sequence[tuple[float, int]]) -> float:
+        """s² for these (NIS, dimension) pairs (1 without innovation scaling)."""
+        if self.innovation_prior_dof is None:
+            return 1.0
+        nu = self.innovation_prior_dof
+        return (nu + sum(n for n, _ in innovations)) / (nu + sum(m for _, m in innovations))
+
+    def claim(self, belief: Belief, innovations: Sequence[tuple[float, int]]) -> Belief:
+        """The belief the episode claims, from the filter's and its accepted innovations."""
+        cov = np.array(belief.cov) * self.scale(innovations)
+        if self.centre_offset_cov is not None:
+            cov[:3, :3] += np.asarray(self.centre_offset_cov, dtype=float)
+        return Belief(belief.mean, cov)
 
 
 def supported(views: Sequence[ViewRecord], window: int) -> bool:
@@ -222,11 +286,32 @@ def supported(views: Sequence[ViewRecord], window: int) -> bool:
     last belief reset, and at most half of the last ``2 * window`` measurements gated out
     (when most recent measurements disagree with the estimate, the estimate is not what the
     camera sees). An episode that fails this ends ``unreliable`` whatever its stop rule said."""
-    start = max((k for k, v in enumerate(views) if "belief_reset" in v.events), default=0)
-    if sum(v.accepted for v in views[start:]) < 2:
+    if _accepted_since_reset(views) < 2:
         return False
     recent = [v for v in views if v.measured][-2 * window :]
     return 2 * sum(not v.accepted for v in recent) <= len(recent)
+
+
+def _contested(
+    prior: Belief,
+    final: Belief,
+    rejected: Sequence[Observation],
+    gate: float | None,
+    update: Callable[..., UpdateResult],
+) -> bool:
+    """Whether the gated-out measurements hold a second answer: two of them that the final
+    belief still rejects but that agree with each other and with the prior (fused one after
+    the other from the prior, both pass the gate). The views then saw the fruit in two
+    places (the accepted ones may be the wrong pair: a biased silhouette fused early gates
+    out the right views that follow), and the final estimate is not what the evidence says."""
+    if gate is None:
+        return False
+    left = [obs for obs in rejected if not update(final, obs.z, obs.model, gate).accepted]
+    for a, b in itertools.combinations(left, 2):
+        first = update(prior, a.z, a.model, gate)
+        if first.accepted and update(first.belief, b.z, b.model, gate).accepted:
+            return True
+    return False
 
 
 def _plan_or_hold(
@@ -242,13 +327,19 @@ def _plan_or_hold(
     except (BveError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
         reason = f"{type(exc).__name__}: {exc}"
     hold = ViewPlan(
-        np.asarray(p_world_camera, dtype=float).copy(), belief.mean.copy(), "fallback", False,
+        np.asarray(p_world_camera, dtype=float).copy(), belief.centre_m.copy(), "fallback", False,
         float("nan"), plan_s=time.perf_counter() - t0,
     )  # fmt: skip
     return hold, [f"planner_failed: {reason}"]
 
 
-def _reopen(prior: Belief, rejected: list[Observation], n: int, gate: float | None) -> Belief | None:
+def _reopen(
+    prior: Belief,
+    rejected: list[Observation],
+    n: int,
+    gate: float | None,
+    update: Callable[..., UpdateResult],
+) -> Belief | None:
     """The episode's prior with ``n`` of the ``rejected`` measurements fused (the newest such
     set), if some ``n`` of them, the newest among them, pass the gate one after another,
     starting from the prior: they agree with each other, and each is geometrically

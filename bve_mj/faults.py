@@ -71,6 +71,8 @@ class FaultyWorld:
         if u_kind < f.false_p:
             self._events.append("false_detection")
             fake = self.world.p_world_fruit + offset_m * direction  # type: ignore[attr-defined]
+            if belief is not None:  # the state as the filter holds it, with another centre
+                fake = np.concatenate([fake, belief.mean[3:]])
             return Observation(np.atleast_1d(obs.model.predict(fake)), obs.model)
         if u_kind < f.false_p + f.outlier_p:
             self._events.append("outlier")

@@ -8,11 +8,23 @@ consistent 3-D Gaussian).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from bve_mj.errors import BveError
+from bve_mj.estimation.models import MeasurementModel
 
-__all__ = ["CHI2_3DOF_AT_9", "consistency_metrics", "euclidean_metrics", "paper_metrics"]
+__all__ = [
+    "CHI2_3DOF_AT_9",
+    "CONSISTENCY_LEVELS",
+    "consistency_curve",
+    "consistency_metrics",
+    "cramer_rao_bound",
+    "euclidean_metrics",
+    "nees_band",
+    "paper_metrics",
+]
 
 CHI2_3DOF_AT_9 = 0.9707091134651118
 """P(χ²₃ ≤ 9): the share of a consistent 3-D Gaussian inside its 3σ ellipsoid."""
@@ -70,3 +82,44 @@ def consistency_metrics(truth: np.ndarray, estimate: np.ndarray, cov: np.ndarray
         "inside_3sigma_pct": float(np.mean(nees <= 9.0) * 100.0),
         "nees_mean": float(np.mean(nees)),
     }
+
+
+CONSISTENCY_LEVELS = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.97, 0.99, 0.999)
+"""The p of the consistency curve: share of episodes inside the p-ellipsoid, against p."""
+
+
+def consistency_curve(nees: Sequence[float] | np.ndarray, dof: int = 3) -> list[tuple[float, float]]:
+    """(p, share of ``nees`` values inside the p-ellipsoid, NEES ≤ χ²_dof(p)) for each p of
+    :data:`CONSISTENCY_LEVELS`: an honest filter lies on the diagonal; below it, its
+    ellipsoids are too small (overconfident), above, too large."""
+    from scipy.stats import chi2
+
+    v = np.asarray([x for x in nees if np.isfinite(x)], dtype=float)
+    if v.size == 0:
+        return [(p, float("nan")) for p in CONSISTENCY_LEVELS]
+    return [(p, float(np.mean(v <= chi2.ppf(p, dof)))) for p in CONSISTENCY_LEVELS]
+
+
+def nees_band(episodes: int, dof: int = 3, probability: float = 0.95) -> tuple[float, float]:
+    """The two-sided ``probability`` band of the mean NEES of ``episodes`` honest episodes:
+    the sum of their NEES is χ² with episodes·dof degrees of freedom."""
+    from scipy.stats import chi2
+
+    n = episodes * dof
+    lo, hi = chi2.ppf([(1 - probability) / 2, (1 + probability) / 2], n)
+    return float(lo / episodes), float(hi / episodes)
+
+
+def cramer_rao_bound(
+    prior_cov: np.ndarray, models: Sequence[MeasurementModel], x_true: np.ndarray
+) -> np.ndarray:
+    """The Bayesian Cramér-Rao bound of the state from a prior of covariance ``prior_cov``
+    (n, n) and the measurements of ``models`` (each fused once), linearised at the true state
+    ``x_true`` (n,): (P0⁻¹ + Σ Hᵢᵀ Rᵢ⁻¹ Hᵢ)⁻¹. No unbiased estimator from those views does
+    better on average; the final error over √tr of its centre block tells how close the
+    episode came."""
+    J = np.linalg.inv(np.asarray(prior_cov, dtype=float))
+    for m in models:
+        H = np.atleast_2d(m.jacobian(x_true))
+        J = J + H.T @ np.linalg.solve(np.atleast_2d(m.noise_cov), H)
+    return np.linalg.inv(J)

@@ -15,9 +15,10 @@ import mujoco
 import numpy as np
 
 from bve_mj.config import EpisodeConfig, Settings, settings_to_dict
-from bve_mj.episode import EpisodeResult, StopRules, ViewRecord, run_episode
+from bve_mj.episode import Claims, EpisodeResult, StopRules, ViewRecord, run_episode
 from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.noise import load_noise_model
 from bve_mj.experiments import EXPERIMENTS, with_overrides
 from bve_mj.faults import FaultyPlanner, FaultyWorld
 from bve_mj.geometry import ray_frame
@@ -28,7 +29,7 @@ from bve_mj.sim.mujoco_world import MujocoWorld
 from bve_mj.sim.scene import Fruit, SceneInfo, build_scene
 from bve_mj.sim.world import World
 
-__all__ = ["MujocoEpisode", "Recorder", "episode_settings", "run_mujoco_episode"]
+__all__ = ["MujocoEpisode", "Recorder", "episode_settings", "run_mujoco_episode", "state_prior"]
 
 
 class Recorder(Protocol):
@@ -89,7 +90,51 @@ class MujocoEpisode:
 
     @property
     def final_error_mm(self) -> float:
-        return 1e3 * float(np.linalg.norm(self.result.final.mean - self.truth))
+        return 1e3 * float(np.linalg.norm(self.result.final.centre_m - self.truth))
+
+    @property
+    def true_radius_m(self) -> float:
+        """The target's equatorial radius [m] (what a radius in the state estimates)."""
+        return self.info.target.radius_m
+
+    def cramer_rao_mm(self) -> float:
+        """√tr of the centre block of the Cramér-Rao bound of the views this episode fused
+        (:func:`bve_mj.metrics.cramer_rao_bound`: the prior, and each accepted view's model
+        with the noise it was fused with, at the true state; calibration biases at 0) [mm];
+        NaN when nothing was fused."""
+        from bve_mj.estimation.models import (
+            BearingSizeModel,
+            CameraModel,
+            MeasurementModel,
+            RangeModel,
+            SizeModel,
+        )
+        from bve_mj.metrics import cramer_rao_bound
+
+        prior = self.result.prior
+        camera = self.settings.measurement.kind in ("camera", "auto")
+        models: list[MeasurementModel] = []
+        for v in self.result.views:
+            info: dict[str, Any] = dict(v.world or {})
+            det: dict[str, Any] = info.get("detection", {})
+            if not v.accepted or "camera_position_m" not in info or "p_camera_m" not in det:
+                continue
+            p, R = np.asarray(info["camera_position_m"]), np.asarray(info["camera_rotation"])
+            if prior.has_radius and "measurement" in info:
+                cov = np.asarray(info["measurement"]["cov"])
+                models.append(BearingSizeModel(p, R, cov) if camera else SizeModel(p, float(cov[2, 2])))
+            elif not prior.has_radius:
+                cov = np.asarray(det["cov_camera_m2"])
+                b = np.asarray(det["bearing_camera"])
+                models.append(CameraModel(p, R, cov) if camera else RangeModel(p, float(b @ cov @ b)))
+        if not models:
+            return float("nan")
+        x_true = np.zeros(prior.dim)
+        x_true[:3] = self.truth
+        if prior.has_radius:
+            x_true[3] = self.true_radius_m
+        bound = cramer_rao_bound(prior.cov, models, x_true)
+        return 1e3 * float(np.sqrt(np.trace(bound[:3, :3])))
 
     def to_json(self) -> dict[str, Any]:
         """The ``--json`` document: settings, seed, views, final error, outcome, wall time."""
@@ -105,15 +150,15 @@ class MujocoEpisode:
                     "accepted": v.accepted,
                     "nis": None if math.isnan(v.nis) else v.nis,
                     "events": list(v.events),
-                    "estimate_m": v.belief.mean.tolist(),
-                    "covariance_m2": v.belief.cov.tolist(),
-                    "error_mm": 1e3 * float(np.linalg.norm(v.belief.mean - self.truth)),
+                    "estimate_m": v.belief.centre_m.tolist(),
+                    "covariance_m2": v.belief.cov[:3, :3].tolist(),
+                    "error_mm": 1e3 * float(np.linalg.norm(v.belief.centre_m - self.truth)),
                     "truth_m": self.truth.tolist(),
+                    **self._radius_json(v.belief),
                     **(v.world or {}),
                 }
             )
         final = self.result.final
-        d = final.mean - self.truth
         return {
             "settings": settings_to_dict(self.settings),
             "seed": self.seed,
@@ -126,11 +171,43 @@ class MujocoEpisode:
             },
             "views": views,
             "final_error_mm": self.final_error_mm,
-            "final_nees": float(d @ np.linalg.solve(final.cov, d)),
+            "final_nees": final.mahalanobis_sq(self.truth),
+            **self._final_radius_json(final),
+            "state": self._state_json(final),
             "outcome": self.result.outcome,
             "wall_s": self.result.wall_s,
         }
 
+    def _radius_json(self, belief: Belief) -> dict[str, float | None]:
+        """The radius estimate, its σ and error [mm] (None without the radius in the state)."""
+        r, sd = belief.radius_m, belief.radius_sigma_m
+        if r is None or sd is None:
+            return {"radius_mm": None, "radius_sigma_mm": None, "radius_error_mm": None}
+        return {
+            "radius_mm": 1e3 * r,
+            "radius_sigma_mm": 1e3 * sd,
+            "radius_error_mm": 1e3 * (r - self.true_radius_m),
+        }
+
+    def _final_radius_json(self, belief: Belief) -> dict[str, float | None]:
+        r = self._radius_json(belief)
+        err, sd = r["radius_error_mm"], r["radius_sigma_mm"]
+        return {
+            "final_radius_mm": r["radius_mm"],
+            "final_radius_sigma_mm": sd,
+            "radius_error_mm": err,
+            "radius_nees": None if err is None or sd is None else (err / sd) ** 2,
+        }
+
+    def _state_json(self, belief: Belief) -> dict[str, Any]:
+        """The whole final state: its layout, mean and covariance (SI units)."""
+        names = ["x_m", "y_m", "z_m", "radius_m", "bias_y_rad", "bias_z_rad", "focal_error_rel"]
+        return {"names": names[: belief.dim], "mean": belief.mean.tolist(), "covariance": belief.cov.tolist()}
+
+
+INNOVATION_PRIOR_DOF = 6.0
+"""How much the noise model's word counts against a fruit's own innovations (degrees of
+freedom, :class:`bve_mj.episode.Claims`)."""
 
 START_MARGIN = 0.15
 """A ready pose is taken once its joints all keep this share of their range from the limits."""
@@ -187,6 +264,21 @@ def detection_prior(
     return Belief(truth + U @ offset, U @ np.diag(sigmas**2) @ U.T)
 
 
+def state_prior(centre: Belief, settings: Settings) -> Belief:
+    """The prior over the whole state when the radius is in it: the centre's, the radius of
+    the fruit type (``fruit.radius_m``, uniform ± ``radius_spread_rel``: σ = spread·r/√3) and,
+    when the sensor declares a calibration error, the camera's biases (principal point as a
+    bearing offset σ = ``principal_point_error_px``/f, focal σ = ``focal_error_rel``; a
+    small floor keeps the covariance definite when one of them is 0)."""
+    fruit, sensor = settings.fruit, settings.sensor
+    sigma_r = max(fruit.radius_m * fruit.radius_spread_rel / math.sqrt(3.0), 1e-5)
+    biases = None
+    if settings.estimates_calibration:
+        pp = max(sensor.principal_point_error_px / settings.camera.focal_px, 1e-6)
+        biases = (pp, pp, max(sensor.focal_error_rel, 1e-6))
+    return centre.extended(fruit.radius_m, sigma_r, biases)
+
+
 def run_mujoco_episode(
     settings: Settings,
     seed: int,
@@ -205,6 +297,10 @@ def run_mujoco_episode(
     """
     s = episode_settings(settings)
     ep = s.episode
+    noise = None
+    if s.filter.state == "centre_radius":  # a bad noise model file fails here, before any work
+        noise = load_noise_model(s.measurement.noise_model)
+        noise.check_camera(s.camera, s.measurement.noise_model)
     scene_ss, prior_ss, sensor_ss, planner_ss, fault_ss = np.random.SeedSequence(seed).spawn(5)
     kin = arm_kinematics(s.robot.name, s.robot.limit_set)
     spec, info = build_scene(
@@ -227,11 +323,14 @@ def run_mujoco_episode(
     else:
         p_camera = kin.camera_pose(q_start)[0]
         prior = detection_prior(p_camera, truth, ep, prior_rng, s.fruit.radius_m)
-    mean = prior.mean
+    if s.filter.state == "centre_radius":
+        prior = state_prior(prior, s)
+    mean = prior.centre_m
     world = MujocoWorld(
         s, kin, model, info, q_start, mean, np.random.default_rng(sensor_ss),
         keep_images=recorder is not None,
         on_step=None if recorder is None else recorder.on_step,
+        noise=noise,
     )  # fmt: skip
     if recorder is not None:
         recorder.attach(world, prior)
@@ -256,6 +355,7 @@ def run_mujoco_episode(
         if ep.approach
         else StopRules(
             sigma_m=ep.stop_sigma_m,
+            min_accepted=ep.converge_after,
             stable_m=ep.stop_stable_m,
             stable_views=ep.stable_views,
             stall_m=ep.stall_m,
@@ -263,7 +363,10 @@ def run_mujoco_episode(
     )
     try:
         on_view = None if recorder is None else recorder.on_view
-        result = run_episode(loop_world, planner, prior, s.filter, ep.views, stop, on_view)
+        claims = None
+        if world.noise is not None:
+            claims = Claims(world.noise.centre_bias_cov(s.fruit.radius_m), INNOVATION_PRIOR_DOF)
+        result = run_episode(loop_world, planner, prior, s.filter, ep.views, stop, on_view, claims)
     finally:
         world.close()
     return MujocoEpisode(result, info, s, seed, q_start)

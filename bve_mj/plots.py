@@ -16,6 +16,7 @@ from bve_mj.errors import ConfigError
 __all__ = [
     "draw_path",
     "path_legend",
+    "plot_consistency",
     "plot_episode",
     "plot_sample_paths",
     "require_matplotlib",
@@ -154,8 +155,8 @@ def plot_sample_paths(
     for i, (title, result, truth) in enumerate(episodes):
         ax = fig.add_subplot(rows, columns, i + 1, projection="3d", computed_zorder=False)
         cams = np.array([v.p_world_camera for v in result.views])
-        est = np.array([result.prior.mean] + [v.belief.mean for v in result.views])
-        err_mm = 1e3 * float(np.linalg.norm(result.final.mean - truth))
+        est = np.array([result.prior.centre_m] + [v.belief.centre_m for v in result.views])
+        err_mm = 1e3 * float(np.linalg.norm(result.final.centre_m - truth))
         draw_path(
             ax,
             cams,
@@ -191,7 +192,8 @@ def _episode_label(doc: dict[str, object]) -> str:
 
 def plot_episode(doc: dict[str, object], prefix: str | Path) -> tuple[Path, Path]:
     """From an episode's JSON document: ``PREFIX_path.png`` (camera path, truth, estimates)
-    and ``PREFIX_error.png`` (error and largest σ against view number)."""
+    and ``PREFIX_error.png`` (error and largest σ against view number; with the radius in
+    the state, the radius' error and σ too)."""
     plt = _pyplot()
     from matplotlib.ticker import MaxNLocator
 
@@ -239,6 +241,11 @@ def plot_episode(doc: dict[str, object], prefix: str | Path) -> tuple[Path, Path
     n = np.arange(len(views))
     ax2.semilogy(n, err, "-o", label="error ‖estimate − truth‖")
     ax2.semilogy(n, sig, "--s", ms=3, label="largest posterior σ")
+    if all(v.get("radius_error_mm") is not None for v in views):
+        r_err = np.array([abs(v["radius_error_mm"]) for v in views])
+        r_sig = np.array([v["radius_sigma_mm"] for v in views])
+        ax2.semilogy(n, np.maximum(r_err, 1e-4), "-^", ms=4, color="#9467bd", label="radius error |r̂ − r|")
+        ax2.semilogy(n, r_sig, ":", color="#9467bd", label="radius σ")
     ax2.set_xlabel("view (0 = from the start pose)")
     ax2.set_ylabel("error and σ [mm], log scale")
     ax2.xaxis.set_major_locator(MaxNLocator(integer=True))
@@ -247,3 +254,33 @@ def plot_episode(doc: dict[str, object], prefix: str | Path) -> tuple[Path, Path
     ax2.set_title(wrap_title(title, 6.0, 9), fontsize=9)
     _save(fig, err_png)
     return path_png, err_png
+
+
+def plot_consistency(curves: dict[str, list[tuple[float, float]]], path: str | Path, title: str = "") -> Path:
+    """The consistency plot: for each named curve (a scenario, a filter, ...; from
+    :func:`bve_mj.metrics.consistency_curve`), the share of episodes whose truth lies inside
+    the final p-ellipsoid against p. An honest filter lies on the diagonal; below it, the
+    covariance claims too much. Written as PNG to ``path``."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 5.2), dpi=110, layout="constrained")
+    ax.plot([0.5, 1.0], [0.5, 1.0], color="0.3", lw=1.2, ls="--", label="honest")
+    colours = plt.get_cmap("tab20").colors
+    for k, (name, points) in enumerate(curves.items()):
+        p = [x for x, _ in points]
+        share = [y for _, y in points]
+        if name == "all":
+            ax.plot(p, share, marker="o", ms=4, lw=2.6, color="black", label=name, zorder=5)
+        else:
+            ax.plot(
+                p, share, marker="o", ms=3, lw=1.1, color=colours[(2 * k) % 20 + (k // 10) % 2], label=name
+            )
+    ax.set_xlim(0.48, 1.005)
+    ax.set_ylim(0.0, 1.02)
+    ax.set_xlabel("p (the ellipsoid holding the truth with probability p, if honest)")
+    ax.set_ylabel("share of episodes with the truth inside it")
+    ax.set_title(wrap_title(title or "consistency of the final covariance", 6.0, 11), fontsize=11)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncols=2, loc="lower right")
+    out = Path(path)
+    _save(fig, out)
+    return out

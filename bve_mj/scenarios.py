@@ -27,9 +27,10 @@ from typing import Any
 
 import numpy as np
 
-from bve_mj.campaign import episode_seed, local_batches
-from bve_mj.config import MeasurementKind, Settings, load_settings, settings_to_dict
+from bve_mj.campaign import episode_seed, local_batches, radius_metrics
+from bve_mj.config import FilterKind, MeasurementKind, Settings, StateKind, load_settings, settings_to_dict
 from bve_mj.errors import BveError, ConfigError
+from bve_mj.metrics import consistency_curve, nees_band
 
 __all__ = [
     "SILENT_NEES",
@@ -57,13 +58,23 @@ class Scenario:
     path: Path
     description: str
 
-    def settings(self, measurement: MeasurementKind | None = None) -> Settings:
-        """The file's settings for the closed loop (``measurement`` overrides the file's)."""
+    def settings(
+        self,
+        measurement: MeasurementKind | None = None,
+        filter_kind: FilterKind | None = None,
+        state: StateKind | None = None,
+    ) -> Settings:
+        """The file's settings for the closed loop (each argument given overrides the file's
+        ``measurement.kind``, ``filter.kind``, ``filter.state``)."""
         from bve_mj.experiments import with_overrides
 
         s = load_settings(self.path)
-        if measurement is not None:
-            s = with_overrides(s, measurement={"kind": measurement})
+        given: dict[str, object] = {
+            k: v for k, v in (("kind", filter_kind), ("state", state)) if v is not None
+        }
+        s = with_overrides(
+            s, measurement={"kind": measurement} if measurement is not None else {}, filter=given
+        )
         return s.for_world("mujoco")
 
 
@@ -125,8 +136,8 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
             "message": str(exc),
         }
     final = ep.result.final
-    d = final.mean - ep.truth
-    nees = float(d @ np.linalg.solve(final.cov, d))
+    d = final.centre_m - ep.truth
+    nees = final.mahalanobis_sq(ep.truth)
     outcome = ep.result.outcome
     return {
         "scenario": name,
@@ -136,13 +147,15 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
         "views": len(ep.result.views),
         "error_mm": 1e3 * float(np.linalg.norm(d)),
         "nees": nees,
-        "sigma_max_mm": 1e3 * float(np.sqrt(np.linalg.eigvalsh(final.cov)[-1])),
+        "sigma_max_mm": 1e3 * final.sigma_max_m,
         "silent_failure": bool(outcome in SUCCESS_OUTCOMES and nees > SILENT_NEES),
         "detected_views": sum(v.measured for v in ep.result.views),
         "accepted_views": sum(v.accepted for v in ep.result.views),
         "truth_m": ep.truth.tolist(),
         "radius_mm": 1e3 * ep.info.target.radius_m,
-        "estimate_m": final.mean.tolist(),
+        "estimate_m": final.centre_m.tolist(),
+        "cramer_rao_mm": ep.cramer_rao_mm(),
+        **radius_metrics(final, ep.true_radius_m),
         "wall_s": ep.result.wall_s,
     }
 
@@ -181,6 +194,11 @@ class SuiteResult:
             outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
         err = np.array([r["error_mm"] for r in ok]) if ok else np.array([math.nan])
         nees = np.array([r["nees"] for r in ok]) if ok else np.array([math.nan])
+        r_err = np.array([abs(r["radius_error_mm"]) for r in ok if r.get("radius_error_mm") is not None])
+        r_nees = np.array([r["radius_nees"] for r in ok if r.get("radius_nees") is not None])
+        crb = np.array(
+            [r["error_mm"] / r["cramer_rao_mm"] for r in ok if np.isfinite(r.get("cramer_rao_mm", math.nan))]
+        )
         return {
             "description": next(s.description for s in self.scenarios if s.name == name),
             "outcomes": outcomes,
@@ -190,7 +208,15 @@ class SuiteResult:
                 "max": float(np.max(err)),
             },
             "nees_mean": float(np.mean(nees)),
+            "nees_band_95": nees_band(len(ok)) if ok else (math.nan, math.nan),
             "inside_3sigma_pct": float(np.mean(nees <= 9.0) * 100.0) if ok else math.nan,
+            "consistency": consistency_curve(nees) if ok else [],
+            "radius_error_mm": {
+                "median": float(np.median(r_err)) if r_err.size else math.nan,
+                "p95": float(np.percentile(r_err, 95)) if r_err.size else math.nan,
+            },
+            "radius_nees_mean": float(np.mean(r_nees)) if r_nees.size else math.nan,
+            "error_to_crb_median": float(np.median(crb)) if crb.size else math.nan,
             "silent_failures": sum(bool(r.get("silent_failure")) for r in rows),
             "views_median": float(np.median([r["views"] for r in ok])) if ok else math.nan,
             "wall_s": float(sum(r.get("wall_s", 0.0) for r in rows)),
@@ -213,10 +239,13 @@ def run_suite(
     seeds: int = 20,
     seed: int = 0,
     measurement: MeasurementKind | None = None,
+    filter_kind: FilterKind | None = None,
+    state: StateKind | None = None,
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> SuiteResult:
-    """Run ``seeds`` episodes of every scenario (``measurement`` overrides each file's)."""
+    """Run ``seeds`` episodes of every scenario (``measurement``, ``filter_kind`` and
+    ``state`` override each file's)."""
     for name, value, lo in (("seeds", seeds, 1), ("seed", seed, 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < lo:
             raise ConfigError(name, value, f"an integer >= {lo}")
@@ -226,7 +255,7 @@ def run_suite(
     if measurement is not None and measurement not in ("camera", "range"):
         raise ConfigError("measurement", measurement, "camera or range")
     t0 = time.perf_counter()
-    settings = {sc.name: sc.settings(measurement) for sc in scenarios}
+    settings = {sc.name: sc.settings(measurement, filter_kind, state) for sc in scenarios}
     chunk = max(1, min(5, seeds // max(1, 2 * workers)))
     tasks: list[Task] = [
         (sc.name, settings[sc.name], seed, tuple(range(start, min(seeds, start + chunk))))
@@ -256,21 +285,27 @@ def format_suite(summaries: dict[str, dict[str, Any]], markdown: bool = False) -
         return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
 
     cols = ("scenario", "outcomes", "median mm", "p95 mm", "max mm", "NEES", "in3σ%", "silent",
-            "views", "wall s")  # fmt: skip
+            "r err mm", "r NEES", "err/CRB", "views", "wall s")  # fmt: skip
     rows = []
     for name, s in summaries.items():
         e = s["error_mm"]
+        band = s.get("nees_band_95", (math.nan, math.nan))
+        flag = "" if not all(map(math.isfinite, band)) or band[0] <= s["nees_mean"] <= band[1] else "*"
         rows.append((
             name, " ".join(f"{k}:{v}" for k, v in sorted(s["outcomes"].items())),
-            num(e["median"], ".2f"), num(e["p95"], ".2f"), num(e["max"], ".2f"), num(s["nees_mean"], ".2f"),
-            num(s["inside_3sigma_pct"], ".0f"), str(s["silent_failures"]), num(s["views_median"], ".1f"),
-            num(s["wall_s"], ".1f"),
+            num(e["median"], ".2f"), num(e["p95"], ".2f"), num(e["max"], ".2f"),
+            num(s["nees_mean"], ".2f") + flag,
+            num(s["inside_3sigma_pct"], ".0f"), str(s["silent_failures"]),
+            num(s.get("radius_error_mm", {}).get("median"), ".2f"), num(s.get("radius_nees_mean"), ".2f"),
+            num(s.get("error_to_crb_median"), ".2f"), num(s["views_median"], ".1f"), num(s["wall_s"], ".1f"),
         ))  # fmt: skip
     note = (
-        "error: final ‖estimate - truth‖ [mm]; NEES: mean (3 if honest); in3σ%: truth inside the "
-        "final 3σ ellipsoid (97.1% if honest); silent: a success outcome (converged, stable, "
-        "approached) with the truth outside the 99.9% ellipsoid; views: median per episode; "
-        "wall: sum of the episodes' wall times"
+        "error: final ‖estimate - truth‖ [mm]; NEES: mean (3 if honest; * outside the 95% band of the "
+        "mean of that many honest episodes); in3σ%: truth inside the final 3σ ellipsoid (97.1% if "
+        "honest); silent: a success outcome (converged, stable, approached) with the truth outside the "
+        "99.9% ellipsoid; r err: median |radius error| [mm] and r NEES its mean NEES (1 if honest); "
+        "err/CRB: median of the final error over √tr of the Cramér-Rao bound of the views taken; "
+        "views: median per episode; wall: sum of the episodes' wall times"
     )
     if markdown:
         lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]

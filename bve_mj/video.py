@@ -95,13 +95,15 @@ def draw_detection(
     assumed_radius_m: float | None = None,
     true_range_m: float | None = None,
     true_radius_m: float | None = None,
+    radius_estimate_m: tuple[float, float] | None = None,
 ) -> np.ndarray:
     """A copy of the image with the fitted silhouette and centre (cyan), or the reason for
     none; the caption and the measured range (and, when given, the true one) above it.
 
-    The measured range is the detector's ρ = r / sin α from the silhouette and the assumed
-    fruit radius r (``assumed_radius_m``); ``true_range_m`` is the true camera-to-fruit-centre
-    distance, which differs by the ratio of the true to the assumed radius.
+    The measured range is the detector's ρ = r / sin α from the silhouette and a fruit
+    radius r: the filter's estimate ``radius_estimate_m`` (mean, σ) where the state holds
+    the radius, else the assumed ``assumed_radius_m``; ``true_range_m`` is the true
+    camera-to-fruit-centre distance, which differs by the ratio of the true to that radius.
     """
     img = np.ascontiguousarray(image_rgb).copy()
     lines: list[tuple[str, tuple[int, int, int]]] = []
@@ -111,8 +113,15 @@ def draw_detection(
         c = tuple(int(x) for x in np.rint(det.centre_px).astype(int))
         cv2.circle(img, c, int(np.rint(det.radius_px)), _CYAN, 2, cv2.LINE_AA)
         cv2.drawMarker(img, c, _CYAN, cv2.MARKER_CROSS, 14, 2)
-        assumed = "" if assumed_radius_m is None else f" (assumes r = {1e3 * assumed_radius_m:.1f} mm)"
-        lines.append((f"measured range {det.range_m:.3f} m{assumed}", _CYAN))
+        if radius_estimate_m is not None:
+            r, sd = radius_estimate_m
+            rho = r / math.sin(det.angular_radius_rad)
+            lines.append(
+                (f"range from size {rho:.3f} m (estimated r = {1e3 * r:.1f} +- {1e3 * sd:.1f} mm)", _CYAN)
+            )
+        else:
+            assumed = "" if assumed_radius_m is None else f" (assumes r = {1e3 * assumed_radius_m:.1f} mm)"
+            lines.append((f"measured range {det.range_m:.3f} m{assumed}", _CYAN))
     elif isinstance(det, NoDetection):
         lines.append((f"no detection: {det.reason}", _CYAN))
     if true_range_m is not None:
@@ -230,7 +239,7 @@ class EpisodeRecorder:
     def attach(self, world: Any, prior: Belief) -> None:
         import imageio.v2 as imageio
 
-        self._world, self._belief = world, prior
+        self._world, self._belief = world, prior.position
         self._writer = imageio.get_writer(str(self.path), fps=self.fps, codec="libx264", macro_block_size=16)
         self._next_t = world.data.time
         self._cam_id = int(world.model.camera(CAMERA_NAME).id)
@@ -248,22 +257,24 @@ class EpisodeRecorder:
     def on_view(self, record: ViewRecord) -> None:
         if self._writer is None:
             return
-        self._belief = record.belief
+        self._belief = record.belief.position
         self._view = record.iteration
         here = self._camera_now()
         self._trail.append(here)
         self._views.append(here)
         w = self._world
         if getattr(w.last, "image", None) is not None:
-            err = _mm(float(np.linalg.norm(record.belief.mean - self._fruit)))
-            sig = _mm(float(np.sqrt(np.linalg.eigvalsh(record.belief.cov)[-1])))
+            err = _mm(float(np.linalg.norm(record.belief.centre_m - self._fruit)))
+            sig = _mm(record.belief.sigma_max_m)
             caption = f"eye-in-hand, view {record.iteration}: error {err}, sigma max {sig}"
             prior = getattr(w, "fruit_prior", None)
+            r, sd = record.belief.radius_m, record.belief.radius_sigma_m
             self._eye = draw_detection(
                 w.last.image, w.last.detection, caption,
                 assumed_radius_m=None if prior is None else float(prior.radius_m),
                 true_range_m=float(np.linalg.norm(here - self._fruit)),
                 true_radius_m=self._radius,
+                radius_estimate_m=None if r is None or sd is None else (r, sd),
             )  # fmt: skip
         frame = self._compose()
         for _ in range(self.hold_frames):

@@ -37,7 +37,9 @@ def main(seed: int = 4, out_dir: str = "out") -> None:
     adr = [model.jnt_qposadr[model.joint(n).id] for n in kin.joint_names]
     data.qpos[adr] = ik.q
     mujoco.mj_forward(model, data)
-    renderer = OffscreenRenderer(model, s.camera.width_px, s.camera.height_px)
+    renderer = OffscreenRenderer(
+        model, s.camera.width_px, s.camera.height_px, blur_sigma_px=s.camera.blur_sigma_px
+    )
     eye = renderer.render(data, CAMERA_NAME)
     intr = Intrinsics.from_camera(s.camera)
     p, R = kin.camera_pose(ik.q)

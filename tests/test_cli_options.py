@@ -158,7 +158,7 @@ def test_api_default_episode_is_the_cli_episode(tmp_path):
     assert api.settings.measurement.kind == doc["settings"]["measurement"]["kind"] == "camera"
     assert api.result.outcome == doc["outcome"]
     assert len(api.result.views) == len(doc["views"])
-    np.testing.assert_allclose(api.result.final.mean, doc["views"][-1]["estimate_m"], atol=1e-12)
+    np.testing.assert_allclose(api.result.final.centre_m, doc["views"][-1]["estimate_m"], atol=1e-12)
 
 
 def test_version(capsys):
