@@ -313,10 +313,10 @@ class FilterConfig:
     iterations: int | None = field(
         default=None,
         metadata=_why(
-            "EKF: linearisations per update (1 = the EKF; more = the iterated EKF, which linearises "
-            "again at the updated mean: a bearing seen from a prior 5 cm off along the ray is "
-            "otherwise fused 1-2 mm off the ray it measured). None: 1 for the centre state (the "
-            "paper's), 10 with the radius in the state. The UKF does not iterate"
+            "linearisations per update (1 = the EKF or UKF; more = the iterated EKF, which linearises "
+            "again at the updated mean, or the UKF's posterior linearisation: a bearing seen from a "
+            "prior 5 cm off along the ray is otherwise fused 1-2 mm off the ray it measured). None: "
+            "1 for the centre state (the paper's), 10 with the radius in the state"
         ),
     )
 
@@ -1224,6 +1224,13 @@ class Settings:
         if self.measurement.kind == "auto":
             kind: MeasurementKind = "range" if world == "synthetic" else "camera"
             out = dataclasses.replace(out, measurement=dataclasses.replace(out.measurement, kind=kind))
+        if world == "synthetic" and self.filter.state == "centre_radius":
+            raise ConfigError(
+                "filter.state",
+                self.filter.state,
+                "auto or centre in the synthetic world (it measures the centre, not an image: "
+                "centre_radius needs the MuJoCo world)",
+            )
         if self.filter.state == "auto":
             state: StateKind = "centre" if world == "synthetic" else "centre_radius"
             out = dataclasses.replace(out, filter=dataclasses.replace(out.filter, state=state))

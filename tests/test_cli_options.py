@@ -166,3 +166,13 @@ def test_version(capsys):
         _build_parser().parse_args(["--version"])
     assert info.value.code == 0
     assert capsys.readouterr().out.startswith("bve-mj ")
+
+
+def test_the_synthetic_world_refuses_the_radius_state_by_name(tmp_path, capsys):
+    """The synthetic world measures the centre, not an image: a radius state there is a
+    settings error naming filter.state (it was an IndexError deep in the loop)."""
+    cfg = tmp_path / "cr.toml"
+    cfg.write_text('[filter]\nstate = "centre_radius"\n')
+    assert main(["paper", "--config", str(cfg), "--experiments", "E1", "--runs", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "filter.state" in err

@@ -112,6 +112,28 @@ def test_ukf_and_ekf_agree_to_first_order_on_small_noise(rng):
     assert u.nis == pytest.approx(e.nis, rel=1e-4)
 
 
+def test_the_iterated_ukf_agrees_with_the_iterated_ekf_where_one_pass_does_not(rng):
+    """A sharp bearing + size measurement from a prior 5 cm long along the ray (the loop's
+    first views): the single-pass UKF regresses the apparent size over ±√3 σ of the prior and
+    lands off the MAP; iterated (posterior linearisation) it agrees with the iterated EKF, the
+    Gauss-Newton MAP, to a small share of the posterior σ."""
+    truth = np.array([0.45, 0.02, 0.25, 0.028])
+    c = np.array([0.20, 0.0, 0.30])
+    ray = (truth[:3] - c) / np.linalg.norm(truth[:3] - c)
+    cov = np.eye(4) * 1e-10
+    cov[:3, :3] = 0.025**2 * np.outer(ray, ray) + 0.002**2 * (np.eye(3) - np.outer(ray, ray))
+    cov[3, 3] = 0.0003**2  # a radius known well: the apparent size pins the range
+    prior = Belief(np.append(truth[:3] + 0.04 * ray, 0.0281), cov)
+    model = BearingSizeModel(c, camera_rotation(c, truth[:3]), np.diag([1e-6, 1e-6, 4e-7]))
+    z = model.predict(truth)
+    ekf10 = update(prior, z, model, iterations=10).belief
+    one, ten = ukf.update(prior, z, model).belief, ukf.update(prior, z, model, iterations=10).belief
+    sigma = np.sqrt(np.diag(ekf10.cov))
+    assert np.max(np.abs(ten.mean - ekf10.mean) / sigma) < 0.1
+    assert np.max(np.abs(one.mean - ekf10.mean) / sigma) > 0.5  # what the iteration is for
+    np.testing.assert_allclose(np.diag(ten.cov), np.diag(ekf10.cov), rtol=0.1)
+
+
 @pytest.mark.parametrize("kind", ["ekf", "ukf"])
 def test_apparent_size_from_several_distances_recovers_the_radius(rng, kind):
     """Range-only (apparent size alone) with the radius in the state: a prior 20% off the

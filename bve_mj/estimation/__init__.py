@@ -29,9 +29,9 @@ __all__ = [
 
 
 def filter_update(kind: Literal["ekf", "ukf"], iterations: int = 1) -> Callable[..., UpdateResult]:
-    """The update step of filter ``kind``: the EKF's (:func:`update`, iterated ``iterations``
-    times at most) or the UKF's (:func:`bve_mj.estimation.ukf.update`); both take (belief,
+    """The update step of filter ``kind``, iterated ``iterations`` times at most: the EKF's
+    (:func:`update`) or the UKF's (:func:`bve_mj.estimation.ukf.update`); both take (belief,
     z, model, gate_probability)."""
     if kind == "ukf":
-        return ukf.update
+        return partial(ukf.update, iterations=iterations)
     return partial(update, iterations=iterations)
