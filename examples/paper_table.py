@@ -1,19 +1,21 @@
 """The paper's table from Python (the same as `bve-mj paper --runs 20`).
 
-python examples/paper_table.py
+python examples/paper_table.py [RUNS]   (default 20 runs per experiment)
 """
 
 from __future__ import annotations
+
+import sys
 
 from bve_mj import EXPERIMENTS, Settings, run_table
 from bve_mj.cli import format_table
 from bve_mj.experiments import PAPER_RESULTS
 
 
-def main() -> None:
-    summaries = run_table(Settings(), list(EXPERIMENTS.values()), runs=20, seed=0)
+def main(runs: int = 20) -> None:
+    summaries = run_table(Settings(), list(EXPERIMENTS.values()), runs=runs, seed=0)
     print("\n".join(format_table(summaries, PAPER_RESULTS)))
 
 
 if __name__ == "__main__":
-    main()
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 20)

@@ -28,7 +28,7 @@ def _args(name: str, out: Path) -> list[str]:
         "approach_video.py": [str(out)],
         "campaign.py": [str(out / "campaign")],
         "headless_episode.py": ["2"],
-        "paper_table.py": [],
+        "paper_table.py": ["3"],  # runs per experiment (20 by default: 50 s)
         "render_scene.py": ["4", str(out)],
         "sample_paths.py": [str(out)],
     }[name]

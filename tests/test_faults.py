@@ -174,8 +174,9 @@ def test_out_of_reach_and_never_visible_are_outcomes_with_exit_3(
 
 
 # --------------------------------------------------------------------------- the suite
-def test_fault_injection_suite_200_mujoco_episodes(tmp_path: Path) -> None:
-    """200 short seeded MuJoCo episodes with the faults of examples/scenarios/faults.toml.
+def test_fault_injection_suite_100_mujoco_episodes(tmp_path: Path) -> None:
+    """100 short seeded MuJoCo episodes with the faults of examples/scenarios/faults.toml (200
+    until the suite's time passed 10 minutes; the figures below are of 200).
 
     In the sphere scene this gave median 0.54, p95 1.61, max 67.65 mm (a wrong-radius range
     bias held after failures repeated one view). In the realistic scene (spheroid fruit, shape
@@ -184,15 +185,17 @@ def test_fault_injection_suite_200_mujoco_episodes(tmp_path: Path) -> None:
     bias the filter still treats as noise (the size issue puts the radius in the state). With
     the prior scaled to the fruit, the failed-view discount and the arc jackknife: median
     0.57, p95 2.99, max 26.98 mm, the max an episode that ended ``max_views`` (NEES 4.0: its
-    covariance said so); converged and stable episodes stay under 25 mm. An
+    covariance said so); converged and stable episodes stay under 25 mm. With the radius in
+    the state (200 episodes): median 0.51, p95 1.92, max 34.94 mm (unfinished); 0 of 184
+    converged episodes outside their 99.9% ellipsoid (38 of 153 before). An
     episode may end ``stalled`` (camera stopped moving) or ``unreliable`` (estimate not
     supported by the measurements): honest outcomes, never a crash."""
     settings = load_settings(REPO / "examples" / "scenarios" / "faults.toml")
     assert settings.faults.drop_p == 0.3 and settings.sensor.encoder_noise_rad > 0
-    spec = CampaignSpec(experiments=("E1", "E5"), worlds=("mujoco",), measurements=("camera",), runs=100)
+    spec = CampaignSpec(experiments=("E1", "E5"), worlds=("mujoco",), measurements=("camera",), runs=50)
     result = run_campaign(settings, spec, tmp_path, workers=2)
     rows = result.rows
-    assert len(rows) == 200
+    assert len(rows) == 100
     assert not result.crashed, result.crashed[:3]
     outcomes = {r["outcome"] for r in rows}
     allowed = {"converged", "stable", "max_views", "never_detected", "ambiguous", "stalled", "unreliable"}
