@@ -1,7 +1,8 @@
 """A small campaign from Python: BVE against the circle baseline in both worlds, resumable.
 
-python examples/campaign.py [OUT_DIR]   (default: out/campaign_example/, which git ignores; run
-it twice: the second call finds every run done and only rewrites the outputs)
+python examples/campaign.py [OUT_DIR] [RUNS]   (defaults: out/campaign_example/, which git
+ignores, and 5 runs per cell; run it twice: the second call finds every run done and only
+rewrites the outputs)
 
 The same from the shell:
 bve-mj campaign --out out/campaign_example --experiments E1,E5 --worlds synthetic,mujoco \
@@ -17,13 +18,13 @@ from bve_mj.campaign import CampaignSpec, run_campaign
 from bve_mj.campaign_report import format_cells, write_campaign_outputs
 
 
-def main(out: str = "out/campaign_example") -> None:
+def main(out: str = "out/campaign_example", runs: int = 5) -> None:
     spec = CampaignSpec(
         experiments=("E1", "E5"),
         worlds=("synthetic", "mujoco"),
         planners=("bve", "circle"),
         measurements=("camera",),
-        runs=5,
+        runs=runs,
         seed=0,
     )
 
@@ -39,4 +40,4 @@ def main(out: str = "out/campaign_example") -> None:
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:2])
+    main(*sys.argv[1:2], *(int(a) for a in sys.argv[2:3]))

@@ -259,7 +259,7 @@ def test_results_page_numbers_come_from_its_campaigns(tmp_path: Path) -> None:
     docs.mkdir()
     argv = ["results", "--out", str(docs / "results.md"), "--work", str(tmp_path / "work"), "--runs", "2",
             "--mujoco-runs", "1", "--recover-runs", "1", "--recover-grid", "0,0.3", "--experiments", "E1",
-            "--workers", "1", "--scenario-seeds", "1", "--quiet"]  # fmt: skip
+            "--workers", "2", "--scenario-seeds", "1", "--quiet"]  # fmt: skip
     code = main(argv)
     assert code == 0
     page = (docs / "results.md").read_text()

@@ -26,7 +26,7 @@ def _args(name: str, out: Path) -> list[str]:
     """Each example's output folder argument (position as its docstring says)."""
     return {
         "approach_video.py": [str(out)],
-        "campaign.py": [str(out / "campaign")],
+        "campaign.py": [str(out / "campaign"), "1"],  # 1 run per cell (5 by default: 39 s)
         "headless_episode.py": ["2"],
         "paper_table.py": ["3"],  # runs per experiment (20 by default: 50 s)
         "render_scene.py": ["4", str(out)],
