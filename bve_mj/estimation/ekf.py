@@ -19,7 +19,7 @@ from bve_mj.errors import EstimationError
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import MeasurementModel
 
-__all__ = ["UpdateResult", "nis_threshold", "predict", "update"]
+__all__ = ["UpdateResult", "gain", "nis_threshold", "predict", "update"]
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,21 @@ def nis_threshold(probability: float, dof: int) -> float:
     return float(chi2.ppf(probability, dof))
 
 
+def gain(S: np.ndarray, HP: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
+    """The Kalman gain P Hᵀ S⁻¹ from the innovation covariance S (symmetric) and H P (the
+    cross-covariance, transposed), and the NIS yᵀ S⁻¹ y of innovation ``y``.
+
+    Raises:
+        EstimationError: if S is singular.
+    """
+    try:
+        Sinv_y = np.linalg.solve(S, y)
+        K = np.linalg.solve(S, HP).T
+    except np.linalg.LinAlgError as exc:
+        raise EstimationError(f"innovation covariance is singular: {exc}") from None
+    return K, float(y @ Sinv_y)
+
+
 def update(
     belief: Belief,
     z: np.ndarray,
@@ -94,13 +109,9 @@ def update(
         y = z - h - H @ (x0 - x)  # = z - h(x0) on the first pass
         S = H @ P @ H.T + R
         S = 0.5 * (S + S.T)
-        try:
-            Sinv_y = np.linalg.solve(S, y)
-            K = np.linalg.solve(S, H @ P).T  # P Hᵀ S⁻¹ (S, P symmetric)
-        except np.linalg.LinAlgError as exc:
-            raise EstimationError(f"innovation covariance is singular: {exc}") from None
+        K, nis_it = gain(S, H @ P, y)
         if it == 0:
-            nis, y0 = float(y @ Sinv_y), y
+            nis, y0 = nis_it, y
             if gate_probability is not None and nis > nis_threshold(gate_probability, m):
                 return UpdateResult(belief, y, nis, False)
         x_new = x0 + K @ y

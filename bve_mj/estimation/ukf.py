@@ -20,7 +20,7 @@ import numpy as np
 
 from bve_mj.errors import EstimationError
 from bve_mj.estimation.belief import Belief
-from bve_mj.estimation.ekf import UpdateResult, nis_threshold
+from bve_mj.estimation.ekf import UpdateResult, gain, nis_threshold
 from bve_mj.estimation.models import MeasurementModel
 
 __all__ = ["sigma_points", "update"]
@@ -94,13 +94,9 @@ def update(
         S = A @ P0 @ A.T + omega + R
         S = 0.5 * (S + S.T)
         y = z - A @ x0 - b  # = z - ẑ on the first pass
-        try:
-            Sinv_y = np.linalg.solve(S, y)
-            K = np.linalg.solve(S, A @ P0).T  # P0 Aᵀ S⁻¹
-        except np.linalg.LinAlgError as exc:
-            raise EstimationError(f"innovation covariance is singular: {exc}") from None
+        K, nis_it = gain(S, A @ P0, y)  # P0 Aᵀ S⁻¹
         if it == 0:
-            nis, y0 = float(y @ Sinv_y), y
+            nis, y0 = nis_it, y
             if gate_probability is not None and nis > nis_threshold(gate_probability, m):
                 return UpdateResult(belief, y, nis, False)
         P_new = P0 - K @ S @ K.T
