@@ -752,6 +752,12 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         f"the fruit's own centre offset: σ {100 * h:.2f}% of its radius horizontally, {100 * v:.2f}% "
         "vertically (added to the centre's covariance)"
     )
+    cc, rc = model.centre_correlation, model.radius_correlation
+    print(
+        f"views from nearby directions share their errors: correlation {cc.weight:.2f} (centre), "
+        f"{rc.weight:.2f} (radius) at 0°, half of it at {cc.half_angle_deg():.0f}° and "
+        f"{rc.half_angle_deg():.0f}° (a repeated view counts as the share it adds)"
+    )
     write_json_atomic(out, model.to_json())
     print(f'wrote {out} (wall {data.wall_s:.0f} s); use it with [measurement] noise_model = "{out}"')
     if json_path is not None:

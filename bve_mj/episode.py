@@ -13,7 +13,8 @@ import numpy as np
 from bve_mj.config import FilterConfig
 from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation import Belief, UpdateResult, filter_update, predict
-from bve_mj.planning.plan import LearnsFromFailedViews, Planner, PlanStatus, ViewPlan
+from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
+from bve_mj.planning.plan import LearnsFromFailedViews, LearnsFromFusedViews, Planner, PlanStatus, ViewPlan
 from bve_mj.sim.world import Observation, World
 
 __all__ = ["Claims", "EpisodeResult", "StopRules", "ViewRecord", "run_episode", "supported"]
@@ -99,6 +100,11 @@ class StopRules:
         return "stalled" if stalled else None
 
 
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-12 else np.array([1.0, 0.0, 0.0])
+
+
 def _accepted_since_reset(views: Sequence[ViewRecord]) -> int:
     """Accepted measurements since the last belief reset (the reset's own view counts)."""
     start = max((k for k, v in enumerate(views) if "belief_reset" in v.events), default=0)
@@ -143,6 +149,7 @@ def run_episode(
     stop: StopRules | None = None,
     on_view: Callable[[ViewRecord], None] | None = None,
     claims: Claims | None = None,
+    correlation: tuple[ViewCorrelation, ViewCorrelation] | None = None,
 ) -> EpisodeResult:
     """Observe from the start pose, then up to ``steps`` times: plan, move, predict, observe,
     update; ``stop`` may end it early. Outcome: the rule that ended it, "max_views", or
@@ -153,6 +160,11 @@ def run_episode(
 
     ``claims``: what the views record (and the stop rules test) beside the filter's own
     belief, which the planner plans with (see :class:`Claims`); None: the filter's belief.
+
+    ``correlation``: how the errors of the centre and of the apparent radius of views from
+    nearby directions correlate (:mod:`bve_mj.estimation.view_correlation`): each
+    measurement is fused as the share of a fresh view it is worth beside the views fused
+    since the last reset (directions seen from the estimate); None: views are independent.
 
     A planner that fails (raises a :class:`BveError`, a numerical error, or returns a
     non-finite point) does not end the episode: the camera holds where it is, looking at the
@@ -173,12 +185,19 @@ def run_episode(
     rejected: list[Observation] = []  # gated-out measurements since the last accepted one
     contested: list[Observation] = []  # gated-out measurements since the last belief reset
     innovations: list[tuple[float, int]] = []  # (NIS, dimension) of the accepted, since a reset
+    fused: list[np.ndarray] = []  # unit directions estimate → camera of the accepted, since a reset
 
     def fuse(i: int, status: PlanStatus | None, feasible: bool, plan_s: float, events: list[str]) -> None:
         nonlocal belief
         looked_at = belief.centre_m
         obs = world.observe(belief)
         measured, accepted, nis = obs is not None, False, float("nan")
+        direction = _unit(world.p_world_camera - belief.centre_m)
+        if obs is not None and correlation is not None and fused:
+            taken = np.array(fused)
+            centre_share = new_view_share(correlation[0], taken, direction)[0]
+            radius_share = new_view_share(correlation[1], taken, direction)[0]
+            obs = dataclasses.replace(obs, model=discounted(obs.model, centre_share, radius_share))
         if obs is not None:
             try:
                 result = update(belief, obs.z, obs.model, gate)
@@ -206,8 +225,10 @@ def run_episode(
                 events.append("ik_failed")
         if accepted:
             innovations.append((nis, np.size(obs.z) if obs is not None else 0))
+            fused.append(direction)
         if "belief_reset" in events:
             innovations[:] = innovations[-1:]
+            fused[:] = fused[-1:]
         claimed = belief if claims is None else claims.claim(belief, innovations)
         views.append(
             ViewRecord(
@@ -217,6 +238,8 @@ def run_episode(
         )  # fmt: skip
         if not accepted and isinstance(planner, LearnsFromFailedViews):
             planner.note_failed_view(world.p_world_camera, looked_at)
+        if accepted and correlation is not None and isinstance(planner, LearnsFromFusedViews):
+            planner.note_fused_view(world.p_world_camera, looked_at, restart="belief_reset" in events)
         q = getattr(world, "q_measured", None)
         if sync is not None and q is not None:
             sync(q)

@@ -363,10 +363,13 @@ def run_mujoco_episode(
     )
     try:
         on_view = None if recorder is None else recorder.on_view
-        claims = None
+        claims, correlation = None, None
         if world.noise is not None:
             claims = Claims(world.noise.centre_bias_cov(s.fruit.radius_m), INNOVATION_PRIOR_DOF)
-        result = run_episode(loop_world, planner, prior, s.filter, ep.views, stop, on_view, claims)
+            correlation = (world.noise.centre_correlation, world.noise.radius_correlation)
+        result = run_episode(
+            loop_world, planner, prior, s.filter, ep.views, stop, on_view, claims, correlation
+        )
     finally:
         world.close()
     return MujocoEpisode(result, info, s, seed, q_start)

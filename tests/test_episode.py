@@ -142,6 +142,26 @@ def test_a_camera_that_stops_moving_ends_the_episode():
     assert approach.outcome(still) == "approach_blocked" and approach.outcome(moving) is None
 
 
+def test_an_estimate_that_stops_moving_on_accepted_views_is_stable():
+    """ "stable": the estimate moved less than stable_m over stable_views views, each with an
+    accepted measurement; a gated-out view is no agreement, and a moving estimate is not."""
+    from bve_mj.episode import StopRules, ViewRecord
+    from bve_mj.estimation.belief import Belief
+
+    def view(i, x, accepted=True):
+        b = Belief(np.array([x, 0.0, 0.2]), np.eye(3) * 1e-4)  # σ 10 mm: not converged
+        return ViewRecord(i, np.array([0.2, 0.01 * i, 0.0]), None, True, 0.0, True, accepted, 1.0, b)
+
+    rules = StopRules(sigma_m=1e-3, stable_m=5e-4, stable_views=3)
+    settled = [view(i, 0.4 + 1e-4 * i) for i in range(5)]
+    assert rules.outcome(settled) == "stable"
+    assert rules.outcome(settled[:3]) is None  # needs stable_views moves
+    assert rules.outcome([*settled[:4], view(4, 0.4004, accepted=False)]) is None
+    drifting = [view(i, 0.4 + 1e-3 * i) for i in range(5)]
+    assert rules.outcome(drifting) is None
+    assert StopRules(sigma_m=1e-3).outcome(settled) is None  # the rule off
+
+
 def test_many_views_stop_when_the_view_stops_changing():
     """--views 10000 --approach used to take 10,001 views (283 s) and end with NEES 3727."""
     s = with_overrides(Settings(), episode={"approach": True, "views": 10000})

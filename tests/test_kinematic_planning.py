@@ -70,3 +70,23 @@ def test_joint_limit_barrier_gradient_matches_finite_differences():
         assert value >= 0.0
     mid = 0.5 * (lo + hi)
     assert barrier(mid) == (0.0, pytest.approx(np.zeros(kin.nq)))
+
+
+def test_joint_look_at_jacobian_matches_finite_differences():
+    """The joint-space planner's look-at terms h(q) = (y_C·d, z_C·d, x_C·d) and ∂h/∂q."""
+    from bve_mj.robot import arm_kinematics
+    from bve_mj.robot.planner import _JointProblem
+
+    kin = arm_kinematics("manipulator_h", "emanual")
+    rng = np.random.default_rng(5)
+    lo, hi = kin.limits.lower, kin.limits.upper
+    for _ in range(10):
+        q = lo + (hi - lo) * rng.uniform(0.3, 0.7, kin.nq)
+        k_hat = kin.camera_pose(q)[0] + rng.normal(0.0, 0.2, 3)
+        _, dh = _JointProblem(kin, k_hat).look_at(q)
+
+        def h(qq, k_hat=k_hat):
+            return _JointProblem(kin, k_hat).look_at(qq)[0]
+
+        fd = np.column_stack([(h(q + e) - h(q - e)) / 2e-6 for e in np.eye(kin.nq) * 1e-6])
+        np.testing.assert_allclose(dh, fd, rtol=1e-5, atol=1e-7)

@@ -25,6 +25,11 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.calibra
   vertically. Views from elsewhere do not average it out: it is bounded, as a world-frame
   offset with σ ``centre_bias_rel`` (horizontal, vertical) times the fruit's radius, added
   to the centre's covariance the filter reports (:meth:`NoiseModel.centre_bias_cov`).
+- the rest of a view's error is shared with views **from nearby directions** (they see
+  nearly the same silhouette): the correlation ρ(θ) of two views' normalised errors against
+  the angle between them, fitted per component (:mod:`bve_mj.estimation.view_correlation`;
+  ``centre_correlation``, ``radius_correlation``). The filter and the planner count a view
+  near the views already fused as the share of a fresh view it is worth.
 
 The fitted model is a JSON file; the package ships one (``default``) and settings name it
 (``measurement.noise_model``). It holds the camera it was made with: a model for another
@@ -36,7 +41,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -45,6 +50,7 @@ import numpy as np
 
 from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
+from bve_mj.estimation.view_correlation import ViewCorrelation, fit_view_correlation
 
 __all__ = [
     "FEATURES",
@@ -58,6 +64,7 @@ __all__ = [
 FEATURES = ("floor", "fit", "partial", "elongation")
 """The variance terms, in the order of the coefficients."""
 _KIND = "bve_mj detector noise model"
+_CORRELATIONS = ("centre_correlation", "radius_correlation")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -76,6 +83,9 @@ class NoiseModel:
         width_px, height_px, hfov_deg: the camera it was calibrated with.
         samples: detections it was fitted to.
         source: how it was made (the command and its seeds).
+        centre_correlation, radius_correlation: how the per-view errors of the centre and
+            of the apparent radius correlate between views of one fruit from nearby
+            directions (independent in a file that does not say).
     """
 
     centre_var_px2: tuple[float, ...]
@@ -88,6 +98,8 @@ class NoiseModel:
     hfov_deg: float
     samples: int
     source: str = ""
+    centre_correlation: ViewCorrelation = field(default_factory=ViewCorrelation)
+    radius_correlation: ViewCorrelation = field(default_factory=ViewCorrelation)
 
     def __post_init__(self) -> None:
         for name in ("centre_var_px2", "radius_var_px2"):
@@ -153,7 +165,7 @@ class NoiseModel:
 
     def to_json(self) -> dict[str, Any]:
         """The file's content (:func:`load_noise_model` reads it back)."""
-        return {"kind": _KIND, "version": 1, "features": list(FEATURES), **asdict(self)}
+        return {"kind": _KIND, "version": 2, "features": list(FEATURES), **asdict(self)}
 
 
 def _default_path() -> Path:
@@ -194,6 +206,7 @@ def load_noise_model(name: str = "default") -> NoiseModel:
                 "radius_var_px2": tuple(float(x) for x in values["radius_var_px2"]),
                 "radius_bias_px": tuple(float(x) for x in values["radius_bias_px"]),
                 "centre_bias_rel": tuple(float(x) for x in values["centre_bias_rel"]),
+                **{k: ViewCorrelation(**values[k]) for k in _CORRELATIONS if k in values},
             }
         )
     except (KeyError, TypeError, ValueError) as exc:
@@ -241,7 +254,10 @@ def fit_noise_model(
         model = _fit(_without_offsets(kept, offsets, f), camera, source)
     offsets = _fruit_offsets(kept, model, f)
     model = replace(model, centre_bias_rel=_offset_bound(offsets))
-    report = noise_report(_without_offsets(kept, offsets, f), model)
+    per_view = _without_offsets(kept, offsets, f)
+    centre_corr, radius_corr = _view_correlations(per_view, model)
+    model = replace(model, centre_correlation=centre_corr, radius_correlation=radius_corr)
+    report = noise_report(per_view, model)
     report["gross_errors"] = len(det) - len(kept)
     report["fruits"] = len(offsets)
     return model, report
@@ -395,6 +411,38 @@ def _offset_bound(
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if inside(mid) < 0.971 else (lo, mid)
     return (math.sqrt(hi * h), math.sqrt(hi * v))
+
+
+def _view_correlations(
+    det: Sequence[dict[str, Any]], model: NoiseModel
+) -> tuple[ViewCorrelation, ViewCorrelation]:
+    """ρ(θ) of the centre's and the apparent radius' per-view errors (the fruit's own offset
+    taken out), from every pair of views of one fruit (rows of one scenario and scene with
+    their camera position and the truth): per pair, the cosine of the angle between the
+    directions from the fruit to the two cameras and the products of their normalised errors
+    (the centre's as the world-frame lateral error vectors' dot product over 2)."""
+    groups: dict[tuple[Any, Any], list[tuple[np.ndarray, np.ndarray, float]]] = {}
+    for r in det:
+        if "camera_position_m" not in r or "camera_rotation" not in r:
+            continue
+        d = np.asarray(r["camera_position_m"], dtype=float) - np.asarray(r["truth_m"], dtype=float)
+        R = np.asarray(r["camera_rotation"], dtype=float)
+        sc, sr = model.sigmas_px(
+            r["radius_px"], r["arc_deg"], r["centre_fit_px"], r["radius_fit_px"], r["fruit_shape_index"]
+        )
+        lateral = (R[:, 1] * r["err_u_px"] + R[:, 2] * r["err_v_px"]) / sc
+        z_radius = (r["err_alpha_px"] - model.radius_bias(r["radius_px"])) / sr
+        groups.setdefault((r["scenario"], r["scene_seed"]), []).append(
+            (d / np.linalg.norm(d), lateral, z_radius)
+        )
+    cos, centre, radius = [], [], []
+    for views in groups.values():
+        for i, (di, ci, ri) in enumerate(views):
+            for dj, cj, rj in views[i + 1 :]:
+                cos.append(float(di @ dj))
+                centre.append(float(ci @ cj) / 2.0)
+                radius.append(ri * rj)
+    return fit_view_correlation(cos, centre), fit_view_correlation(cos, radius)
 
 
 def noise_report(rows: Sequence[dict[str, Any]], model: NoiseModel) -> dict[str, Any]:

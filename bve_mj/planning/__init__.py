@@ -36,7 +36,7 @@ from bve_mj.planning.losses import (
     Objective,
     approach_activation,
 )
-from bve_mj.planning.plan import LearnsFromFailedViews, Planner, PlanStatus, ViewPlan
+from bve_mj.planning.plan import LearnsFromFailedViews, LearnsFromFusedViews, Planner, PlanStatus, ViewPlan
 
 __all__ = [
     "ApproachTerm",
@@ -51,6 +51,7 @@ __all__ = [
     "FailedViewDiscount",
     "FieldOfViewCone",
     "LearnsFromFailedViews",
+    "LearnsFromFusedViews",
     "MaxEigenvalueLoss",
     "Objective",
     "ObservationInformation",

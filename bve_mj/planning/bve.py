@@ -39,6 +39,7 @@ from bve_mj.planning.horizon import HorizonObjective, horizon_constraints
 from bve_mj.planning.information import (
     FailedViewDiscount,
     ObservationInformation,
+    SizeInformation,
     observation_information,
 )
 from bve_mj.planning.losses import (
@@ -78,6 +79,7 @@ class BvePlanner:
     info: ObservationInformation = field(init=False)
     _views_precision: np.ndarray | None = field(init=False, default=None)
     _failed: list[np.ndarray] = field(init=False, default_factory=list)
+    _fused: list[np.ndarray] = field(init=False, default_factory=list)
 
     def __post_init__(self) -> None:
         self.constraint_names = check_constraint_names(self.constraint_names)
@@ -103,12 +105,30 @@ class BvePlanner:
         if self.settings.planner.failed_view_width_deg > 0.0 and np.isfinite(n) and n > 1e-9:
             self._failed.append(d / n)
 
+    def note_fused_view(
+        self, p_world_camera: np.ndarray, p_world_target: np.ndarray, *, restart: bool = False
+    ) -> None:
+        """The filter fused the view from ``p_world_camera`` of the estimate
+        ``p_world_target`` (``restart``: the first after a belief reset): with a noise model
+        whose views' errors correlate, later plans expect less of views near it
+        (:class:`SizeInformation` ``taken``)."""
+        if restart:
+            self._fused.clear()
+        d = np.asarray(p_world_camera, dtype=float) - np.asarray(p_world_target, dtype=float)
+        n = float(np.linalg.norm(d))
+        if isinstance(self.info, SizeInformation) and np.isfinite(n) and n > 1e-9:
+            self._fused.append(d / n)
+
     def information_model(self) -> ObservationInformation:
-        """Λn(c) as the objective sees it: discounted near the views that failed."""
+        """Λn(c) as the objective sees it: each view as the share of a fresh one it adds
+        beside the views fused, discounted near the views that failed."""
+        info = self.info
+        if self._fused and isinstance(info, SizeInformation):
+            info = dataclasses.replace(info, taken=np.array(self._fused))
         if not self._failed:
-            return self.info
+            return info
         width = math.radians(self.settings.planner.failed_view_width_deg)
-        return FailedViewDiscount(self.info, np.array(self._failed), width)
+        return FailedViewDiscount(info, np.array(self._failed), width)
 
     def objective(
         self, belief: Belief, iteration: int, extra_precision: np.ndarray | None = None

@@ -34,6 +34,7 @@ from typing import Protocol
 import numpy as np
 
 from bve_mj.config import Settings
+from bve_mj.estimation.view_correlation import ViewCorrelation, new_view_share
 from bve_mj.geometry import camera_rotation, camera_rotation_derivative
 
 __all__ = [
@@ -164,11 +165,20 @@ class SizeInformation:
     whole fruit of apparent radius f·T [px], as variances [rad²] of the form a + b·T²:
     ``bearing_var`` and ``size_var``. Every factor is a function of ρ (and R_C^W of c): the
     derivative is analytic.
+
+    ``taken``: unit directions (k, 3) from the estimate to the views fused so far; a view
+    from a nearby direction shares their errors and is expected to add only its share Δ(e)
+    of a fresh view's information (:func:`~bve_mj.estimation.view_correlation.
+    new_view_share`, per component with ``correlation`` = (centre, apparent radius)), the
+    way the filter will fuse it: the BVE then prefers a view that adds evidence of its own
+    to a repeat of the best one.
     """
 
     bearing_var: tuple[float, float]
     size_var: tuple[float, float]
     bearing: bool = True
+    taken: np.ndarray | None = None
+    correlation: tuple[ViewCorrelation, ViewCorrelation] = (ViewCorrelation(), ViewCorrelation())
 
     def _rows(self, c: np.ndarray, x_hat: np.ndarray, with_derivative: bool) -> tuple[
         np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None
@@ -224,8 +234,9 @@ class SizeInformation:
         w.append(w_a)
         dw_rho.append(dw_a)
         H, W = np.array(rows), np.array(w)
+        shares = self._view_shares(-x, rho, len(w))
         if dR is None:
-            return H, W, None, None
+            return H, W if shares is None else W * shares[0], None, None
         drho = -x  # dρ/dc
         dH = np.einsum("mi,j->mij", np.array(drows_rho), drho)
         # the columns of R_C^W in the centre's entries: d(coefficient · axis)/dc = coefficient · d(axis)/dc
@@ -234,7 +245,23 @@ class SizeInformation:
             dH[1, :3, :] += dR[:, 2, :] / (rho * g)
         dH[-1, :3, :] += s_a * dR[:, 0, :]
         dW = np.outer(np.array(dw_rho), drho)
+        if shares is not None:
+            f, df = shares
+            dW = dW * f[:, None] + W[:, None] * df
+            W = W * f
         return H, W, dH, dW
+
+    def _view_shares(self, e: np.ndarray, rho: float, m: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The share Δ of a fresh view that each of the m rows (the bearing rows, then the
+        size row) of a view from direction ``e`` at distance ``rho`` adds beside ``taken``,
+        (m,), and its derivative in c, (m, 3); None when every view counts in full."""
+        if self.taken is None or not len(self.taken):
+            return None
+        P = (np.eye(3) - np.outer(e, e)) / rho  # ∂e/∂c
+        (fc, dfc), (fr, dfr) = (new_view_share(corr, self.taken, e) for corr in self.correlation)
+        f = np.array([fc] * (m - 1) + [fr])
+        df = np.array([P @ dfc] * (m - 1) + [P @ dfr])
+        return f, df
 
     def information(self, c: np.ndarray, x_hat: np.ndarray) -> np.ndarray:
         H, W, _, _ = self._rows(c, x_hat, False)
@@ -264,7 +291,10 @@ def size_information(settings: Settings) -> SizeInformation:
     r0, r1 = float(np.dot(noise.radius_var_px2, whole)), noise.radius_var_px2[3] * (elongation / 10.0) ** 2
     enc = (2.5 * settings.sensor.encoder_noise_rad) ** 2
     return SizeInformation(
-        (c0 / f**2 + enc, float(c1)), (r0 / f**2, float(r1)), settings.measurement.kind != "range"
+        (c0 / f**2 + enc, float(c1)),
+        (r0 / f**2, float(r1)),
+        settings.measurement.kind != "range",
+        correlation=(noise.centre_correlation, noise.radius_correlation),
     )
 
 

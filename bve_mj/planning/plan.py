@@ -9,7 +9,7 @@ import numpy as np
 
 from bve_mj.estimation.belief import Belief
 
-__all__ = ["LearnsFromFailedViews", "PlanStatus", "Planner", "ViewPlan"]
+__all__ = ["LearnsFromFailedViews", "LearnsFromFusedViews", "PlanStatus", "Planner", "ViewPlan"]
 
 PlanStatus = Literal["optimal", "best_feasible", "restoring", "fallback"]
 """optimal: the optimiser converged on a feasible point. best_feasible: it did not converge
@@ -68,4 +68,17 @@ class LearnsFromFailedViews(Protocol):
     def note_failed_view(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
         """The camera at ``p_world_camera``, looking at the estimate ``p_world_target``, got
         no usable measurement."""
+        ...
+
+
+@runtime_checkable
+class LearnsFromFusedViews(Protocol):
+    """A planner the episode loop tells of each view the filter fused, so that it can expect
+    less of views that would repeat one (their errors are shared)."""
+
+    def note_fused_view(
+        self, p_world_camera: np.ndarray, p_world_target: np.ndarray, *, restart: bool = False
+    ) -> None:
+        """The filter fused the view from ``p_world_camera`` of the estimate ``p_world_target``
+        (``restart``: after a belief reset, which forgot the views fused before it)."""
         ...

@@ -176,6 +176,12 @@ class KinematicBvePlanner:
         """See :meth:`BvePlanner.note_failed_view`."""
         self._bve.note_failed_view(p_world_camera, p_world_target)
 
+    def note_fused_view(
+        self, p_world_camera: np.ndarray, p_world_target: np.ndarray, *, restart: bool = False
+    ) -> None:
+        """See :meth:`BvePlanner.note_fused_view`."""
+        self._bve.note_fused_view(p_world_camera, p_world_target, restart=restart)
+
     # ------------------------------------------------------------------ plan
     def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
         t0 = time.perf_counter()
