@@ -14,8 +14,15 @@ from bve_mj.config import FilterConfig
 from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation import Belief, UpdateResult, filter_update, predict
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
-from bve_mj.planning.plan import LearnsFromFailedViews, LearnsFromFusedViews, Planner, PlanStatus, ViewPlan
-from bve_mj.sim.world import Observation, World
+from bve_mj.planning.plan import (
+    LearnsFromFailedViews,
+    LearnsFromFusedViews,
+    Planner,
+    PlanStatus,
+    SyncsToEncoders,
+    ViewPlan,
+)
+from bve_mj.sim.world import Observation, ReadsEncoders, ReportsViews, World
 
 __all__ = ["Claims", "EpisodeResult", "StopRules", "ViewRecord", "run_episode", "supported"]
 
@@ -181,7 +188,6 @@ def run_episode(
     belief = prior
     views: list[ViewRecord] = []
 
-    sync = getattr(planner, "set_configuration", None)
     rejected: list[Observation] = []  # gated-out measurements since the last accepted one
     contested: list[Observation] = []  # gated-out measurements since the last belief reset
     innovations: list[tuple[float, int]] = []  # (NIS, dimension) of the accepted, since a reset
@@ -218,7 +224,7 @@ def run_episode(
             except EstimationError as exc:
                 raise EstimationError(f"view {i}: {exc}; the episode stops here") from None
             belief, accepted, nis = result.belief, result.accepted, result.nis
-        info = world.view_info() if hasattr(world, "view_info") else None
+        info = world.view_info() if isinstance(world, ReportsViews) else None
         if info is not None:
             events += [str(e) for e in (*info.get("events", []), *info.get("faults", []))]
             if info.get("ik_failed") and "ik_failure" not in events:
@@ -240,9 +246,9 @@ def run_episode(
             planner.note_failed_view(world.p_world_camera, looked_at)
         if accepted and correlation is not None and isinstance(planner, LearnsFromFusedViews):
             planner.note_fused_view(world.p_world_camera, looked_at, restart="belief_reset" in events)
-        q = getattr(world, "q_measured", None)
-        if sync is not None and q is not None:
-            sync(q)
+        q = world.q_measured if isinstance(world, ReadsEncoders) else None
+        if q is not None and isinstance(planner, SyncsToEncoders):
+            planner.set_configuration(q)
         if on_view is not None:
             on_view(views[-1])
 

@@ -173,10 +173,11 @@ def synthetic_episode(
         )
     else:
         planner = make_planner(settings, experiment.loss, experiment.constraints, planner_rng)
-    world: World = SyntheticWorld(settings, scenario, np.random.default_rng(noise_ss))
+    synthetic = SyntheticWorld(settings, scenario, np.random.default_rng(noise_ss))
+    world: World = synthetic
     if settings.faults.any:
         fault_rng = np.random.default_rng(fault_ss)
-        world = FaultyWorld(world, settings.faults, fault_rng)
+        world = FaultyWorld(synthetic, settings.faults, fault_rng)
         planner = FaultyPlanner(planner, settings.faults.planner_failure_p, fault_rng)
     prior = Belief.isotropic(scenario.initial_estimate, settings.filter.initial_sigma_m)
     return scenario, run_episode(world, planner, prior, settings.filter, settings.protocol.steps)

@@ -17,8 +17,20 @@ import numpy as np
 from bve_mj.config import FaultConfig
 from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
-from bve_mj.planning.plan import Planner, ViewPlan
-from bve_mj.sim.world import Observation, World
+from bve_mj.planning.plan import (
+    LearnsFromFailedViews,
+    LearnsFromFusedViews,
+    Planner,
+    SyncsToEncoders,
+    ViewPlan,
+)
+from bve_mj.sim.world import (
+    HoldsOnFailedMove,
+    Observation,
+    ReadsEncoders,
+    ReportsViews,
+    SimulatedWorld,
+)
 
 __all__ = ["FaultyPlanner", "FaultyWorld"]
 
@@ -26,7 +38,7 @@ __all__ = ["FaultyPlanner", "FaultyWorld"]
 class FaultyWorld:
     """``world`` with the faults of ``faults`` injected from ``rng``."""
 
-    def __init__(self, world: World, faults: FaultConfig, rng: np.random.Generator) -> None:
+    def __init__(self, world: SimulatedWorld, faults: FaultConfig, rng: np.random.Generator) -> None:
         self.world = world
         self.faults = faults
         self._rng = rng
@@ -39,16 +51,15 @@ class FaultyWorld:
 
     @property
     def q_measured(self) -> np.ndarray | None:
-        return getattr(self.world, "q_measured", None)
+        return self.world.q_measured if isinstance(self.world, ReadsEncoders) else None
 
     def move_camera(self, plan: ViewPlan) -> None:
         self._view += 1
         self._events = []
         if self._rng.random() < self.faults.ik_failure_p:
             self._events.append("ik_failure")
-            hold = getattr(self.world, "hold", None)
-            if hold is not None:
-                hold(plan)
+            if isinstance(self.world, HoldsOnFailedMove):
+                self.world.hold(plan)
             else:  # a world without an arm: the camera stays, looking at the new target
                 self.world.move_camera(
                     dataclasses.replace(plan, p_world_camera=self.world.p_world_camera, q=None)
@@ -70,7 +81,7 @@ class FaultyWorld:
             return None
         if u_kind < f.false_p:
             self._events.append("false_detection")
-            fake = self.world.p_world_fruit + offset_m * direction  # type: ignore[attr-defined]
+            fake = self.world.p_world_fruit + offset_m * direction
             if belief is not None:  # the state as the filter holds it, with another centre
                 fake = np.concatenate([fake, belief.mean[3:]])
             return Observation(np.atleast_1d(obs.model.predict(fake)), obs.model)
@@ -83,13 +94,13 @@ class FaultyWorld:
         return obs
 
     def view_info(self) -> dict[str, Any]:
-        inner = getattr(self.world, "view_info", None)
-        info = dict(inner()) if inner is not None else {}
+        info = dict(self.world.view_info()) if isinstance(self.world, ReportsViews) else {}
         info["faults"] = list(self._events)
         return info
 
-    def __getattr__(self, name: str) -> Any:  # p_world_fruit, close, hold, ... of the world
-        return getattr(self.world, name)
+    @property
+    def p_world_fruit(self) -> np.ndarray:
+        return self.world.p_world_fruit
 
 
 class FaultyPlanner:
@@ -106,6 +117,15 @@ class FaultyPlanner:
         return self.planner.plan(belief, p_world_camera, iteration)
 
     def set_configuration(self, q: np.ndarray) -> None:
-        sync = getattr(self.planner, "set_configuration", None)
-        if sync is not None:
-            sync(q)
+        if isinstance(self.planner, SyncsToEncoders):
+            self.planner.set_configuration(q)
+
+    def note_failed_view(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        if isinstance(self.planner, LearnsFromFailedViews):
+            self.planner.note_failed_view(p_world_camera, p_world_target)
+
+    def note_fused_view(
+        self, p_world_camera: np.ndarray, p_world_target: np.ndarray, *, restart: bool = False
+    ) -> None:
+        if isinstance(self.planner, LearnsFromFusedViews):
+            self.planner.note_fused_view(p_world_camera, p_world_target, restart=restart)

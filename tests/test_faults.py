@@ -174,9 +174,10 @@ def test_out_of_reach_and_never_visible_are_outcomes_with_exit_3(
 
 
 # --------------------------------------------------------------------------- the suite
-def test_fault_injection_suite_100_mujoco_episodes(tmp_path: Path) -> None:
-    """100 short seeded MuJoCo episodes with the faults of examples/scenarios/faults.toml (200
-    until the suite's time passed 10 minutes; the figures below are of 200).
+def test_fault_injection_suite_60_mujoco_episodes(tmp_path: Path) -> None:
+    """60 short seeded MuJoCo episodes with the faults of examples/scenarios/faults.toml (200,
+    then 100, until the suite's time passed 10 minutes; the figures below are of 200;
+    ``bve-mj campaign --config examples/scenarios/faults.toml`` runs the full campaign).
 
     In the sphere scene this gave median 0.54, p95 1.61, max 67.65 mm (a wrong-radius range
     bias held after failures repeated one view). In the realistic scene (spheroid fruit, shape
@@ -192,10 +193,10 @@ def test_fault_injection_suite_100_mujoco_episodes(tmp_path: Path) -> None:
     supported by the measurements): honest outcomes, never a crash."""
     settings = load_settings(REPO / "examples" / "scenarios" / "faults.toml")
     assert settings.faults.drop_p == 0.3 and settings.sensor.encoder_noise_rad > 0
-    spec = CampaignSpec(experiments=("E1", "E5"), worlds=("mujoco",), measurements=("camera",), runs=50)
+    spec = CampaignSpec(experiments=("E1", "E5"), worlds=("mujoco",), measurements=("camera",), runs=30)
     result = run_campaign(settings, spec, tmp_path, workers=2)
     rows = result.rows
-    assert len(rows) == 100
+    assert len(rows) == 60
     assert not result.crashed, result.crashed[:3]
     outcomes = {r["outcome"] for r in rows}
     allowed = {"converged", "stable", "max_views", "never_detected", "ambiguous", "stalled", "unreliable"}

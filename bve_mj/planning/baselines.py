@@ -27,6 +27,7 @@ from bve_mj.estimation.belief import Belief
 from bve_mj.planning.constraints import (
     Constraint,
     ConstraintName,
+    ExpensiveConstraint,
     ExtraConstraints,
     StepLimit,
     build_constraints,
@@ -43,9 +44,11 @@ _MAX_EXPENSIVE_CHECKS = 16
 
 
 def _split(task: Sequence[Constraint]) -> tuple[list[Constraint], list[Constraint]]:
-    """(cheap, expensive) constraints; expensive ones carry ``expensive = True``."""
-    cheap = [c for c in task if not getattr(c, "expensive", False)]
-    return cheap, [c for c in task if getattr(c, "expensive", False)]
+    """(cheap, expensive) constraints (:class:`ExpensiveConstraint` with ``expensive`` true)."""
+    costly = [isinstance(c, ExpensiveConstraint) and c.expensive for c in task]
+    return [c for c, x in zip(task, costly, strict=True) if not x], [
+        c for c, x in zip(task, costly, strict=True) if x
+    ]
 
 
 def _holds(constraints: Sequence[Constraint], x: np.ndarray, tol: float) -> bool:

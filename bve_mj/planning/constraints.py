@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, Protocol, get_args
+from typing import Literal, Protocol, get_args, runtime_checkable
 
 import numpy as np
 
@@ -30,6 +30,7 @@ __all__ = [
     "Constraint",
     "ConstraintName",
     "DistanceBand",
+    "ExpensiveConstraint",
     "ExtraConstraints",
     "FieldOfViewCone",
     "OutsideFruit",
@@ -59,6 +60,14 @@ class Constraint(Protocol):
     def gradient(self, c: np.ndarray) -> np.ndarray:
         """∇g(c), (3,)."""
         ...
+
+
+@runtime_checkable
+class ExpensiveConstraint(Protocol):
+    """A constraint whose evaluation is costly (the arm's reachability: an IK solve each):
+    the baselines check it last, on candidates that pass every cheap one."""
+
+    expensive: bool
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,14 @@ import numpy as np
 
 from bve_mj.estimation.belief import Belief
 
-__all__ = ["LearnsFromFailedViews", "LearnsFromFusedViews", "PlanStatus", "Planner", "ViewPlan"]
+__all__ = [
+    "LearnsFromFailedViews",
+    "LearnsFromFusedViews",
+    "PlanStatus",
+    "Planner",
+    "SyncsToEncoders",
+    "ViewPlan",
+]
 
 PlanStatus = Literal["optimal", "best_feasible", "restoring", "fallback"]
 """optimal: the optimiser converged on a feasible point. best_feasible: it did not converge
@@ -81,4 +88,14 @@ class LearnsFromFusedViews(Protocol):
     ) -> None:
         """The filter fused the view from ``p_world_camera`` of the estimate ``p_world_target``
         (``restart``: after a belief reset, which forgot the views fused before it)."""
+        ...
+
+
+@runtime_checkable
+class SyncsToEncoders(Protocol):
+    """A planner for an arm that plans the next move from the joint angles the encoders read
+    (not from where its last plan put the arm)."""
+
+    def set_configuration(self, q: np.ndarray) -> None:
+        """Plan the next move from ``q`` [rad]."""
         ...

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -11,7 +11,15 @@ from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import MeasurementModel
 from bve_mj.planning.plan import ViewPlan
 
-__all__ = ["Observation", "Scenario", "World"]
+__all__ = [
+    "HoldsOnFailedMove",
+    "Observation",
+    "ReadsEncoders",
+    "ReportsViews",
+    "Scenario",
+    "SimulatedWorld",
+    "World",
+]
 
 
 @dataclass(frozen=True)
@@ -54,4 +62,45 @@ class World(Protocol):
 
         ``belief``: the filter's prediction for this view (a world that sees several fruit
         uses it to tell which one is the target)."""
+        ...
+
+
+@runtime_checkable
+class ReportsViews(Protocol):
+    """A world that tells what happened in the last view beyond the measurement (an arm's
+    joint angles, timings, detector events, injected faults): the episode records it."""
+
+    def view_info(self) -> dict[str, Any]:
+        """The last view, JSON-ready; ``events``/``faults`` (lists of text) and ``ik_failed``
+        (bool) are read by the loop."""
+        ...
+
+
+@runtime_checkable
+class ReadsEncoders(Protocol):
+    """A world with an arm whose joint angles are measured: the loop passes them to a planner
+    that plans the next move from them (:class:`~bve_mj.planning.plan.SyncsToEncoders`)."""
+
+    @property
+    def q_measured(self) -> np.ndarray | None:
+        """The joint angles the encoders read at the last view [rad] (None before one)."""
+        ...
+
+
+@runtime_checkable
+class HoldsOnFailedMove(Protocol):
+    """A world whose arm can be told that a move failed (its IK): it holds where it is."""
+
+    def hold(self, plan: ViewPlan) -> None:
+        """The move to ``plan`` failed: stay, with ``plan`` as the next target."""
+        ...
+
+
+class SimulatedWorld(World, Protocol):
+    """A world that knows the truth (the synthetic and the MuJoCo worlds): what a fault
+    injector needs to fake a detection of something else."""
+
+    @property
+    def p_world_fruit(self) -> np.ndarray:
+        """The true fruit centre [m], (3,)."""
         ...
