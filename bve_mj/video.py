@@ -18,7 +18,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import mujoco
@@ -29,6 +29,9 @@ from bve_mj.estimation.belief import Belief
 from bve_mj.perception.detector import Detection, NoDetection
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.scene import fruit_geom_name
+
+if TYPE_CHECKING:
+    from bve_mj.sim.mujoco_world import MujocoWorld
 
 __all__ = ["EpisodeRecorder", "draw_detection"]
 
@@ -219,7 +222,7 @@ class EpisodeRecorder:
         self.hold_frames = max(1, round(hold_view_s * fps))
         self.frames_written = 0
         self._writer: Any = None
-        self._world: Any = None
+        self._world: MujocoWorld | None = None
         self._belief: Belief | None = None
         self._trail: list[np.ndarray] = []  # the true camera position at every frame
         self._views: list[np.ndarray] = []  # ... and at every view
@@ -235,8 +238,15 @@ class EpisodeRecorder:
         self._glcam: _View | None = None
         self._corner: tuple[int, int] | None = None
 
+    @property
+    def world(self) -> MujocoWorld:
+        """The world :meth:`attach` wired this recorder to."""
+        if self._world is None:
+            raise RuntimeError("the recorder is not attached to a world")
+        return self._world
+
     # -- wiring
-    def attach(self, world: Any, prior: Belief) -> None:
+    def attach(self, world: MujocoWorld, prior: Belief) -> None:
         import imageio.v2 as imageio
 
         self._world, self._belief = world, prior.position
@@ -262,12 +272,12 @@ class EpisodeRecorder:
         here = self._camera_now()
         self._trail.append(here)
         self._views.append(here)
-        w = self._world
-        if getattr(w.last, "image", None) is not None:
+        w = self.world
+        if w.last.image is not None:
             err = _mm(float(np.linalg.norm(record.belief.centre_m - self._fruit)))
             sig = _mm(record.belief.sigma_max_m)
             caption = f"eye-in-hand, view {record.iteration}: error {err}, sigma max {sig}"
-            prior = getattr(w, "fruit_prior", None)
+            prior = w.fruit_prior
             r, sd = record.belief.radius_m, record.belief.radius_sigma_m
             self._eye = draw_detection(
                 w.last.image, w.last.detection, caption,
@@ -289,26 +299,26 @@ class EpisodeRecorder:
 
     # -- the outside camera
     def _camera_now(self) -> np.ndarray:
-        return np.array(self._world.data.cam_xpos[self._cam_id], dtype=float)
+        return np.array(self.world.data.cam_xpos[self._cam_id], dtype=float)
 
     def _size(self) -> tuple[int, int]:
-        r = self._world.renderer
+        r = self.world.renderer
         return int(r.width), int(r.height)
 
     def _fovy(self) -> float:
-        return float(self._world.model.vis.global_.fovy)
+        return float(self.world.model.vis.global_.fovy)
 
     def _choose_side(self) -> tuple[float, float]:
         """(azimuth, elevation) [deg] of the outside camera: from the side of the line from
         the camera to the fruit (the arm reaches along it, so it does not hide the path), the
         candidate whose rays to the fruit and the camera path's start are least blocked."""
-        m, d = self._world.model, self._world.data
+        m, d = self.world.model, self.world.data
         f, c0 = self._fruit, self._trail[0]
         a = (f - c0)[:2]
         if np.linalg.norm(a) < 1e-6:
             a = f[:2] if np.linalg.norm(f[:2]) > 1e-6 else np.array([1.0, 0.0])
         base = math.degrees(math.atan2(a[1], a[0]))
-        target = m.geom(fruit_geom_name(self._world.info.target.name)).id
+        target = m.geom(fruit_geom_name(self.world.info.target.name)).id
         w, h = self._size()
         pts = np.stack([f + self._radius * np.eye(3)[2], f - self._radius * np.eye(3)[2], f, c0])
         best: tuple[float, float, float] | None = None
@@ -479,7 +489,7 @@ class EpisodeRecorder:
         img[y0 : y0 + size, x0 : x0 + size] = panel
 
     def _compose(self) -> np.ndarray:
-        w = self._world
+        w = self.world
         self._update_framing()
         assert self._lookat is not None
         outside = w.renderer.render_free(
