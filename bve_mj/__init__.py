@@ -19,6 +19,7 @@ if TYPE_CHECKING:
     from bve_mj.estimation import Belief, CameraModel, RangeModel, predict, update
     from bve_mj.experiments import EXPERIMENTS, Experiment, run_synthetic, run_table
     from bve_mj.geometry import camera_rotation, look_at_pose
+    from bve_mj.mujoco_episode import MujocoEpisode, run_mujoco_episode
     from bve_mj.planning import BvePlanner, CirclePlanner, RandomPlanner, ViewPlan, make_planner
     from bve_mj.sim import Scenario, SyntheticWorld
 
@@ -31,6 +32,7 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("Belief", "CameraModel", "RangeModel", "predict", "update"), "bve_mj.estimation"),
     **dict.fromkeys(("EXPERIMENTS", "Experiment", "run_synthetic", "run_table"), "bve_mj.experiments"),
     **dict.fromkeys(("camera_rotation", "look_at_pose"), "bve_mj.geometry"),
+    **dict.fromkeys(("MujocoEpisode", "run_mujoco_episode"), "bve_mj.mujoco_episode"),
     **dict.fromkeys(
         ("BvePlanner", "CirclePlanner", "RandomPlanner", "ViewPlan", "make_planner"), "bve_mj.planning"
     ),
@@ -62,6 +64,7 @@ __all__ = [
     "EpisodeResult",
     "EstimationError",
     "Experiment",
+    "MujocoEpisode",
     "PlanningError",
     "RandomPlanner",
     "RangeModel",
@@ -78,6 +81,7 @@ __all__ = [
     "make_planner",
     "predict",
     "run_episode",
+    "run_mujoco_episode",
     "run_synthetic",
     "run_table",
     "settings_from_dict",

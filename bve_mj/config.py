@@ -77,12 +77,22 @@ def _why(text: str, unit: str = "") -> dict[str, str]:
 
 
 # --------------------------------------------------------------------------- validation
+MAX_MAGNITUDE = 1e9
+"""No real setting is larger than this in magnitude (lengths in m, angles, variances, weights):
+a larger one is a typo, and squaring or sampling it overflows."""
+
+
 def _number(section: str, name: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
         raise ConfigError(f"{section}.{name}", value, "a real number")
-    v = float(value)
-    if not math.isfinite(v):
-        raise ConfigError(f"{section}.{name}", value, "a finite real number")
+    try:
+        v = float(value)
+    except OverflowError:
+        v = math.inf
+    if not math.isfinite(v) or abs(v) > MAX_MAGNITUDE:
+        raise ConfigError(
+            f"{section}.{name}", value, f"a finite real number of magnitude <= {MAX_MAGNITUDE:g}"
+        )
     return v
 
 
@@ -96,15 +106,28 @@ def _non_negative(section: str, name: str, value: Any) -> None:
         raise ConfigError(f"{section}.{name}", value, "a number >= 0")
 
 
+def _between(section: str, name: str, value: Any, lo: float, hi: float) -> None:
+    """lo <= value <= hi: a number outside is no measurement of this world (a tiny σ collapses
+    the filter's covariance, a huge one means nothing)."""
+    v = _number(section, name, value)
+    if not lo <= v <= hi:
+        raise ConfigError(f"{section}.{name}", value, f"a number in [{lo:g}, {hi:g}]")
+
+
 def _open_interval(section: str, name: str, value: Any, lo: float, hi: float, text: str) -> None:
     v = _number(section, name, value)
     if not lo < v < hi:
         raise ConfigError(f"{section}.{name}", value, text)
 
 
-def _positive_int(section: str, name: str, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ConfigError(f"{section}.{name}", value, "an integer >= 1")
+MAX_COUNT = 1_000_000
+"""No count setting is larger than this (its own bound, where it has one, is tighter): a larger
+one is a typo that would run for ever."""
+
+
+def _positive_int(section: str, name: str, value: Any, high: int = MAX_COUNT) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= value <= high:
+        raise ConfigError(f"{section}.{name}", value, f"an integer in [1, {high}]")
 
 
 def _choice(section: str, name: str, value: Any, literal: Any) -> None:
@@ -147,8 +170,8 @@ class CameraConfig:
 
     def __post_init__(self) -> None:
         _open_interval("camera", "hfov_rad", self.hfov_rad, 0.0, math.pi, "a number in (0, pi)")
-        _positive_int("camera", "width_px", self.width_px)
-        _positive_int("camera", "height_px", self.height_px)
+        _positive_int("camera", "width_px", self.width_px, 8192)
+        _positive_int("camera", "height_px", self.height_px, 8192)
         if not 0.0 <= _number("camera", "blur_sigma_px", self.blur_sigma_px) <= 5.0:
             raise ConfigError("camera.blur_sigma_px", self.blur_sigma_px, "a number in [0, 5]")
 
@@ -269,9 +292,9 @@ class MeasurementConfig:
         _choice("measurement", "kind", self.kind, MeasurementKind)
         if not isinstance(self.noise_model, str) or not self.noise_model.strip():
             raise ConfigError("measurement.noise_model", self.noise_model, "default or a JSON file path")
-        _positive("measurement", "centre_sigma_px", self.centre_sigma_px)
-        _positive("measurement", "radius_sigma_px", self.radius_sigma_px)
-        _positive("measurement", "reference_range_m", self.reference_range_m)
+        _between("measurement", "centre_sigma_px", self.centre_sigma_px, 1e-3, 1e3)
+        _between("measurement", "radius_sigma_px", self.radius_sigma_px, 1e-3, 1e3)
+        _between("measurement", "reference_range_m", self.reference_range_m, 0.01, 100.0)
         if self.sigma_c_m2 is not None:
             object.__setattr__(self, "sigma_c_m2", _covariance("measurement.sigma_c_m2", self.sigma_c_m2))
 
@@ -357,12 +380,12 @@ class FilterConfig:
         _choice("filter", "kind", self.kind, FilterKind)
         _choice("filter", "state", self.state, StateKind)
         if self.iterations is not None:
-            _positive_int("filter", "iterations", self.iterations)
+            _positive_int("filter", "iterations", self.iterations, 100)
             if self.iterations > 100:
                 raise ConfigError("filter.iterations", self.iterations, "an integer in [1, 100] or none")
         _non_negative("filter", "process_sigma_m", self.process_sigma_m)
         _positive("filter", "initial_sigma_m", self.initial_sigma_m)
-        _positive_int("filter", "reset_after_rejections", self.reset_after_rejections)
+        _positive_int("filter", "reset_after_rejections", self.reset_after_rejections, 100)
         if self.gate_probability is not None:
             _open_interval(
                 "filter",
@@ -492,14 +515,12 @@ class PlannerConfig:
         _non_negative("planner", "approach_set_point", self.approach_set_point)
         _non_negative("planner", "max_eigenvalue_trace_weight", self.max_eigenvalue_trace_weight)
         _non_negative("planner", "joint_margin_weight", self.joint_margin_weight)
-        _positive_int("planner", "starts", self.starts)
+        _positive_int("planner", "starts", self.starts, 1000)
         if not 0.0 <= _number("planner", "failed_view_width_deg", self.failed_view_width_deg) <= 90.0:
             raise ConfigError(
                 "planner.failed_view_width_deg", self.failed_view_width_deg, "a number in [0, 90]"
             )
-        _positive_int("planner", "max_iterations", self.max_iterations)
-        if self.max_iterations > 100_000:
-            raise ConfigError("planner.max_iterations", self.max_iterations, "an integer in [1, 100000]")
+        _positive_int("planner", "max_iterations", self.max_iterations, 100_000)
         _positive_int("planner", "horizon", self.horizon)
         if self.horizon > 6:
             raise ConfigError("planner.horizon", self.horizon, "an integer in [1, 6]")
@@ -526,7 +547,7 @@ class ProtocolConfig:
         _positive("protocol", "fruit_half_extent_m", self.fruit_half_extent_m)
         _positive("protocol", "camera_half_extent_m", self.camera_half_extent_m)
         _non_negative("protocol", "initial_error_m", self.initial_error_m)
-        _positive_int("protocol", "steps", self.steps)
+        _positive_int("protocol", "steps", self.steps, 10_000)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -605,8 +626,8 @@ FRUIT_TYPE_SHAPE_INDEX: dict[str, tuple[float, float]] = {
 
 
 def _int_at_least(section: str, name: str, value: Any, low: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ConfigError(f"{section}.{name}", value, f"an integer >= {low}")
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= value <= MAX_COUNT:
+        raise ConfigError(f"{section}.{name}", value, f"an integer in [{low}, {MAX_COUNT}]")
 
 
 def _optional_range(
@@ -747,9 +768,9 @@ class SceneConfig:
     def __post_init__(self) -> None:
         _positive("scene", "pedestal_height_m", self.pedestal_height_m)
         _positive("scene", "row_x_m", self.row_x_m)
-        _positive_int("scene", "plants", self.plants)
-        _positive_int("scene", "trusses", self.trusses)
-        _positive_int("scene", "fruit_per_truss", self.fruit_per_truss)
+        _positive_int("scene", "plants", self.plants, 50)
+        _positive_int("scene", "trusses", self.trusses, 20)
+        _positive_int("scene", "fruit_per_truss", self.fruit_per_truss, 40)
         _int_at_least("scene", "target_index", self.target_index, 0)
         if self.target_index >= self.fruit_per_truss:
             raise ConfigError(
@@ -1130,9 +1151,9 @@ class EpisodeConfig:
     )
 
     def __post_init__(self) -> None:
-        _positive_int("episode", "views", self.views)
-        _positive_int("episode", "stable_views", self.stable_views)
-        _positive_int("episode", "converge_after", self.converge_after)
+        _positive_int("episode", "views", self.views, 10_000)
+        _positive_int("episode", "stable_views", self.stable_views, 100)
+        _positive_int("episode", "converge_after", self.converge_after, 100)
         for f in ("band_distance_m", "band_tolerance_m", "step_m", "stop_sigma_m", "approach_distance_m"):
             _positive("episode", f, getattr(self, f))
         _non_negative("episode", "initial_error_m", self.initial_error_m)
@@ -1325,6 +1346,10 @@ def load_settings(path: str | Path, base: Settings | None = None) -> Settings:
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError("config", str(p), f"a readable TOML file ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            "config", str(p), f"a UTF-8 text TOML file (byte {exc.start} is not UTF-8)"
+        ) from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
