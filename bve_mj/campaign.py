@@ -24,6 +24,7 @@ import math
 import multiprocessing
 import os
 import sqlite3
+import subprocess
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -355,13 +356,48 @@ def _first_difference(a: Any, b: Any, path: str = "") -> str | None:
     return None if a == b else f"{path or 'value'}: {a!r} here, {b!r} asked"
 
 
+def code_identity() -> dict[str, str]:
+    """The code that makes a run: the package version and, from a git checkout, its commit
+    (``+dirty`` with uncommitted changes to tracked files; ``unknown`` outside a checkout)."""
+    from bve_mj import __version__
+
+    here = Path(__file__).resolve().parent
+    commit = "unknown"
+    try:
+        head = subprocess.run(
+            ["git", "-C", str(here), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10
+        )
+        if head.returncode == 0:
+            commit = head.stdout.strip()
+            dirty = subprocess.run(
+                ["git", "-C", str(here), "status", "--porcelain", "--untracked-files=no"],
+                capture_output=True, text=True, timeout=10,
+            )  # fmt: skip
+            if dirty.returncode == 0 and dirty.stdout.strip():
+                commit += "+dirty"
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return {"version": __version__, "commit": commit}
+
+
 class RunStore:
-    """The campaign's SQLite database: finished runs by key, and the identity they share."""
+    """The campaign's SQLite database: finished runs by key, the identity they share, and the
+    code that made them (:func:`code_identity`).
+
+    A campaign resumed under other code than the one that started it mixes rows of two
+    programs: :attr:`code_change` says so (the CLI prints it); ``strict`` refuses instead."""
 
     FILENAME = "runs.sqlite"
 
-    def __init__(self, directory: str | Path, identity: dict[str, Any]) -> None:
+    def __init__(
+        self,
+        directory: str | Path,
+        identity: dict[str, Any],
+        code: dict[str, str] | None = None,
+        strict: bool = False,
+    ) -> None:
         self.path = Path(directory) / self.FILENAME
+        self.code_change: str | None = None
         ident = json.loads(json.dumps(identity))
         try:
             self._db = sqlite3.connect(self.path, timeout=30.0)
@@ -384,10 +420,30 @@ class RunStore:
                         "a new directory, or the settings and seed of the campaign already in it "
                         f"(they differ at {diff})",
                     )
+            if code is not None:
+                self._check_code(str(directory), code, strict)
         except sqlite3.DatabaseError as exc:
             raise ConfigError(
                 "out", str(directory), f"a campaign directory ({self.path.name} is unreadable: {exc})"
             ) from None
+
+    def _check_code(self, directory: str, code: dict[str, str], strict: bool) -> None:
+        found = self._db.execute("SELECT value FROM meta WHERE name = 'code'").fetchone()
+        if found is None:
+            with self._db:
+                self._db.execute("INSERT INTO meta VALUES ('code', ?)", (json.dumps(code),))
+            return
+        made = json.loads(found[0])
+        if made == code:
+            return
+        change = (
+            f"its runs were made by bve_mj {made.get('version')} at commit {made.get('commit')}; "
+            f"this is {code['version']} at {code['commit']}"
+        )
+        if strict:
+            self._db.close()
+            raise ConfigError("out", directory, f"a campaign made by this code (--strict: {change})")
+        self.code_change = change
 
     def done(self) -> set[str]:
         """Keys of the finished runs (a crashed run is not finished: it is run again)."""
@@ -488,6 +544,7 @@ class CampaignResult:
     crashed: tuple[str, ...]
     wall_s: float
     directory: Path
+    code_change: str | None = None
 
     @functools.cached_property
     def _by_key(self) -> dict[str, dict[str, Any]]:
@@ -515,8 +572,12 @@ def run_campaign(
     workers: int | None = None,
     scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
+    strict: bool = False,
 ) -> CampaignResult:
     """Run every cell × run of ``spec`` not yet in ``directory``'s store; return all rows.
+
+    The store records the code that started it (:func:`code_identity`); resuming under other
+    code is noted in the result's ``code_change``, or refused with ``strict``.
 
     ``workers``: local processes (default: all cores); ``scheduler``: a Dask distributed
     scheduler address instead (``tcp://host:8786``; dask imported only then).
@@ -540,7 +601,8 @@ def run_campaign(
     settings = for_robot(settings)
     cells = spec.cells(settings)
     t0 = time.perf_counter()
-    store = RunStore(out, {"format": STORE_FORMAT, "seed": spec.seed, "settings": settings_to_dict(settings)})
+    identity = {"format": STORE_FORMAT, "seed": spec.seed, "settings": settings_to_dict(settings)}
+    store = RunStore(out, identity, code_identity(), strict)
     crashed: list[str] = []
     try:
         done = store.done()
@@ -563,5 +625,5 @@ def run_campaign(
         store.close()
     return CampaignResult(
         spec, settings, tuple(cells), tuple(rows), resumed, len(todo), tuple(crashed),
-        time.perf_counter() - t0, out,
+        time.perf_counter() - t0, out, store.code_change,
     )  # fmt: skip

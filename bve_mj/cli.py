@@ -171,6 +171,11 @@ def _build_parser() -> argparse.ArgumentParser:
         )
         c.add_argument("--config", default=None, help="TOML file of settings (sections as in bve_mj.config)")
         c.add_argument("--workers", default=None, help="local processes (default: all cores)")
+        c.add_argument(
+            "--strict",
+            action="store_true",
+            help="refuse to resume a campaign its store says other code started (default: a note)",
+        )
         c.add_argument("--scheduler", default=None, help="Dask distributed scheduler address instead")
         c.add_argument(
             "--no-plots", action="store_true", help="skip the PNG figures (skipped anyway without matplotlib)"
@@ -591,10 +596,16 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     )
     show = not args.quiet and sys.stderr.isatty()
     result = run_campaign(
-        settings, spec, args.out, workers=workers, scheduler=args.scheduler, progress=_progress(show)
-    )
+        settings, spec, args.out, workers=workers, scheduler=args.scheduler, progress=_progress(show),
+        strict=args.strict,
+    )  # fmt: skip
     if result.resumed_runs:
         print(f"resumed: {result.resumed_runs} runs were already done, {result.computed_runs} computed now")
+    if result.code_change is not None:
+        print(
+            f"bve-mj: note: resumed under other code: {result.code_change} (--strict refuses)",
+            file=sys.stderr,
+        )
     if not args.quiet:
         for line in format_cells(result):
             print(line)

@@ -128,6 +128,38 @@ def test_store_refuses_other_settings_and_unreadable_files(tmp_path: Path) -> No
         run_campaign(SMALL, spec, tmp_path / "file", workers=1)
 
 
+def test_the_store_records_the_code_and_a_resume_under_other_code_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from bve_mj.campaign import code_identity
+
+    code = code_identity()
+    assert code["version"] and code["commit"]
+    spec = CampaignSpec(experiments=("E1",), runs=1)
+    first = run_campaign(SMALL, spec, tmp_path / "c", workers=1)
+    assert first.code_change is None
+    assert run_campaign(SMALL, spec, tmp_path / "c", workers=1).code_change is None  # same code
+    db = sqlite3.connect(tmp_path / "c" / RunStore.FILENAME)
+    with db:
+        db.execute("UPDATE meta SET value = ? WHERE name = 'code'", (json.dumps({**code, "commit": "0ld"}),))
+    db.close()
+    again = run_campaign(SMALL, spec, tmp_path / "c", workers=1)
+    assert again.code_change is not None and "0ld" in again.code_change
+    assert again.rows == first.rows  # resumed, nothing lost
+    with pytest.raises(ConfigError, match="strict"):
+        run_campaign(SMALL, spec, tmp_path / "c", workers=1, strict=True)
+    argv = ["campaign", "--out", str(tmp_path / "c"), "--experiments", "E1", "--runs", "1",
+            "--worlds", "synthetic", "--planners", "bve", "--quiet", "--workers", "1"]  # fmt: skip
+    config = tmp_path / "small.toml"
+    config.write_text("[protocol]\nsteps = 8\n")
+    capsys.readouterr()
+    assert main([*argv, "--config", str(config), "--strict"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--strict" in err and "0ld" in err
+    assert main([*argv, "--config", str(config)]) == 0
+    assert "resumed under other code" in capsys.readouterr().err
+
+
 def test_a_crashing_run_is_recorded_and_retried(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import bve_mj.campaign as campaign
 
