@@ -41,7 +41,7 @@ import numpy as np
 
 from bve_mj.estimation.models import BearingSizeModel, MeasurementModel, SizeModel
 
-__all__ = ["ViewCorrelation", "discounted", "fit_view_correlation", "new_view_share"]
+__all__ = ["TakenViews", "ViewCorrelation", "discounted", "fit_view_correlation", "new_view_share"]
 
 
 @dataclass(frozen=True)
@@ -76,23 +76,45 @@ class ViewCorrelation:
         return self.weight * np.exp(-(1.0 - np.asarray(cos_theta, dtype=float)) / self.width)
 
 
+@dataclass(frozen=True)
+class TakenViews:
+    """The views taken, from unit directions (k, 3), with their correlation matrix C and C⁻¹ 1
+    made once: :meth:`share` is then called for each candidate view (the planner calls it at
+    every evaluation of its objective) with one small solve."""
+
+    corr: ViewCorrelation
+    directions: np.ndarray
+    _C: np.ndarray
+    _a: np.ndarray  # C⁻¹ 1
+
+    @classmethod
+    def of(cls, corr: ViewCorrelation, directions: np.ndarray) -> TakenViews:
+        d = np.asarray(directions, dtype=float).reshape(-1, 3)
+        if corr.independent or len(d) == 0:
+            return cls(corr, d, np.zeros((0, 0)), np.zeros(0))
+        C = corr.rho(d @ d.T)
+        np.fill_diagonal(C, 1.0)
+        return cls(corr, d, C, np.linalg.solve(C, np.ones(len(d))))
+
+    def share(self, e: np.ndarray) -> tuple[float, np.ndarray]:
+        """Δ(e): what a view from the unit direction ``e`` (3,) is worth beside these views,
+        as a share of a fresh view, and ∂Δ/∂e (3,)."""
+        if not len(self._a):
+            return 1.0, np.zeros(3)
+        b = self.corr.rho(self.directions @ e)
+        u = np.linalg.solve(self._C, b)  # C⁻¹ b
+        m = 1.0 - float(b @ self._a)
+        s = max(1.0 - float(b @ u), 1e-12)
+        share = min(max(m * m / s, 1e-9), 1.0)
+        # ∂Δ/∂b = 2m (m u - s a) / s²; ∂b_j/∂e = b_j d_j / width
+        db = 2.0 * m * (m * u - s * self._a) / (s * s)
+        return share, (db * b / self.corr.width) @ self.directions
+
+
 def new_view_share(corr: ViewCorrelation, taken: np.ndarray, e: np.ndarray) -> tuple[float, np.ndarray]:
-    """Δ(e): what a view from the unit direction ``e`` (3,) is worth beside the views from the
-    unit directions ``taken`` (k, 3), as a share of a fresh view, and ∂Δ/∂e (3,)."""
-    taken = np.asarray(taken, dtype=float).reshape(-1, 3)
-    if corr.independent or len(taken) == 0:
-        return 1.0, np.zeros(3)
-    C = corr.rho(taken @ taken.T)
-    np.fill_diagonal(C, 1.0)
-    b = corr.rho(taken @ e)
-    a = np.linalg.solve(C, np.ones(len(taken)))  # C⁻¹ 1
-    u = np.linalg.solve(C, b)  # C⁻¹ b
-    m = 1.0 - float(b @ a)
-    s = max(1.0 - float(b @ u), 1e-12)
-    share = min(max(m * m / s, 1e-9), 1.0)
-    # ∂Δ/∂b = 2m (m u - s a) / s²; ∂b_j/∂e = b_j d_j / width
-    db = 2.0 * m * (m * u - s * a) / (s * s)
-    return share, (db * b / corr.width) @ taken
+    """Δ(e) and ∂Δ/∂e of a view from the unit direction ``e`` (3,) beside the views from the
+    unit directions ``taken`` (k, 3) (:class:`TakenViews` when asked for many ``e``)."""
+    return TakenViews.of(corr, taken).share(e)
 
 
 def discounted(model: MeasurementModel, centre_share: float, radius_share: float) -> MeasurementModel:

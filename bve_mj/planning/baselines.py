@@ -45,10 +45,11 @@ _MAX_EXPENSIVE_CHECKS = 16
 
 def _split(task: Sequence[Constraint]) -> tuple[list[Constraint], list[Constraint]]:
     """(cheap, expensive) constraints (:class:`ExpensiveConstraint` with ``expensive`` true)."""
-    costly = [isinstance(c, ExpensiveConstraint) and c.expensive for c in task]
-    return [c for c, x in zip(task, costly, strict=True) if not x], [
-        c for c, x in zip(task, costly, strict=True) if x
-    ]
+
+    def costly(c: Constraint) -> bool:
+        return isinstance(c, ExpensiveConstraint) and c.expensive
+
+    return [c for c in task if not costly(c)], [c for c in task if costly(c)]
 
 
 def _holds(constraints: Sequence[Constraint], x: np.ndarray, tol: float) -> bool:

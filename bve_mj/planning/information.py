@@ -34,7 +34,7 @@ from typing import Protocol
 import numpy as np
 
 from bve_mj.config import Settings
-from bve_mj.estimation.view_correlation import ViewCorrelation, new_view_share
+from bve_mj.estimation.view_correlation import TakenViews, ViewCorrelation
 from bve_mj.geometry import camera_rotation, camera_rotation_derivative
 
 __all__ = [
@@ -180,6 +180,12 @@ class SizeInformation:
     taken: np.ndarray | None = None
     correlation: tuple[ViewCorrelation, ViewCorrelation] = (ViewCorrelation(), ViewCorrelation())
 
+    def __post_init__(self) -> None:
+        views = None
+        if self.taken is not None and len(self.taken):
+            views = tuple(TakenViews.of(corr, self.taken) for corr in self.correlation)
+        object.__setattr__(self, "_taken_views", views)
+
     def _rows(self, c: np.ndarray, x_hat: np.ndarray, with_derivative: bool) -> tuple[
         np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None
     ]:  # fmt: skip
@@ -255,10 +261,11 @@ class SizeInformation:
         """The share Δ of a fresh view that each of the m rows (the bearing rows, then the
         size row) of a view from direction ``e`` at distance ``rho`` adds beside ``taken``,
         (m,), and its derivative in c, (m, 3); None when every view counts in full."""
-        if self.taken is None or not len(self.taken):
+        views: tuple[TakenViews, TakenViews] | None = self._taken_views  # type: ignore[attr-defined]
+        if views is None:
             return None
         P = (np.eye(3) - np.outer(e, e)) / rho  # ∂e/∂c
-        (fc, dfc), (fr, dfr) = (new_view_share(corr, self.taken, e) for corr in self.correlation)
+        (fc, dfc), (fr, dfr) = (v.share(e) for v in views)
         f = np.array([fc] * (m - 1) + [fr])
         df = np.array([P @ dfc] * (m - 1) + [P @ dfr])
         return f, df
