@@ -141,10 +141,10 @@ Task = tuple[str, Any, int, int]
 
 
 def _run_task(task: Task) -> list[dict[str, Any]]:
-    from threadpoolctl import threadpool_limits
+    from bve_mj.threads import one_blas_thread
 
     name, settings, scene_seed, views = task
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         return sample_views(name, settings, scene_seed, views)
 
 

@@ -475,14 +475,12 @@ T = TypeVar("T")
 def _run_task(task: Task) -> list[dict[str, Any]]:
     """Run a chunk; a run that crashes (a bug, not bad input) becomes a "crashed" row so
     that one bad run never takes down the other thousands (stored, retried on resume)."""
-    from threadpoolctl import threadpool_limits
+    from bve_mj.threads import one_blas_thread
 
     settings, items, seed = task
     rows = []
-    # One BLAS thread: a multi-threaded BLAS rounds differently (1e-9 relative after 30
-    # views), so this is what makes a run's result the same in-process, in a local pool
-    # and on a Dask worker (which pins it to one too); for 3x3 algebra it is also faster.
-    with threadpool_limits(limits=1, user_api="blas"):
+    # one BLAS thread: the same result in-process, in a local pool and on a Dask worker
+    with one_blas_thread():
         for cell, run in items:
             try:
                 rows.append(run_cell(settings, cell, seed, run))

@@ -795,11 +795,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command is None:
             parser.print_help()
             return EXIT_USAGE
-        from threadpoolctl import threadpool_limits
+        from bve_mj.threads import one_blas_thread
 
         # one BLAS thread: results then match a campaign's (its workers pin it too), and a
         # multi-threaded BLAS only adds overhead to 3x3 algebra
-        with threadpool_limits(limits=1, user_api="blas"):
+        with one_blas_thread():
             if args.command == "paper":
                 return _cmd_paper(args)
             if args.command == "episode":

@@ -161,10 +161,10 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
 
 
 def _run_task(task: Task) -> list[dict[str, Any]]:
-    from threadpoolctl import threadpool_limits
+    from bve_mj.threads import one_blas_thread
 
     name, settings, seed, runs = task
-    with threadpool_limits(limits=1, user_api="blas"):  # results identical in any process
+    with one_blas_thread():  # results identical in any process
         rows = []
         for run in runs:
             try:
