@@ -69,3 +69,23 @@ def test_any_value_of_any_setting_gives_a_clear_answer(tmp_path_factory, field, 
     assert "Traceback" not in text and "internal error" not in text, text
     if code == 2:
         assert len(text.splitlines()) == 1, text
+
+
+@pytest.mark.parametrize(
+    ("content", "field"),
+    [
+        (b"\xad\x00\xff binary", "config"),
+        (b"[episode]\ninitial_error_m = 1e308\n", "episode.initial_error_m"),
+        (b"[measurement]\nreference_range_m = 1.4e-45\n", "measurement.reference_range_m"),
+        (b"[planner]\nstarts = 1099511627776\n", "planner.starts"),
+        (b"[protocol]\nsteps = 1099511627776\n", "protocol.steps"),
+    ],
+)
+def test_what_the_fuzzing_found_exits_2_naming_the_field(tmp_path, capsys, content, field):
+    """The defects the fuzzing found at 1,500 examples (an internal error, an overflow, a
+    collapsed covariance, runs without end), each kept as a case of its own."""
+    path = tmp_path / "settings.toml"
+    path.write_bytes(content)
+    assert main(["paper", "--config", str(path), "--runs", "1", "--experiments", "E1", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"error: {field}" in err, err
