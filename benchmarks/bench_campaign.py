@@ -16,7 +16,8 @@ import time
 from pathlib import Path
 
 from bve_mj import Settings
-from bve_mj.campaign import CampaignSpec, run_campaign
+from bve_mj.campaigns.runner import run_campaign
+from bve_mj.campaigns.spec import CampaignSpec
 
 
 def _stable(rows: tuple[dict, ...]) -> list[dict]:

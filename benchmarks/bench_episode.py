@@ -16,8 +16,8 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from bve_mj import Settings
-from bve_mj.experiments import with_overrides
-from bve_mj.mujoco_episode import run_mujoco_episode
+from bve_mj.config import with_overrides
+from bve_mj.loop.mujoco import run_mujoco_episode
 
 ROWS = (("bve", "camera"), ("random", "camera"), ("circle", "camera"),
         ("bve", "range"), ("random", "range"), ("circle", "range"))  # fmt: skip

@@ -14,8 +14,9 @@ import time
 
 import numpy as np
 
-from bve_mj.config import Settings
-from bve_mj.experiments import EXPERIMENTS, run_synthetic, with_overrides
+from bve_mj.campaigns.paper import run_synthetic
+from bve_mj.config import Settings, with_overrides
+from bve_mj.config.experiments import EXPERIMENTS
 
 
 def main() -> None:

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import argparse
 
-from bve_mj.config import Settings
-from bve_mj.experiments import EXPERIMENTS, run_table, with_overrides
+from bve_mj.campaigns.paper import run_table
+from bve_mj.config import Settings, with_overrides
+from bve_mj.config.experiments import EXPERIMENTS
 
 ROWS = (
     ("bve/consistent", {"kind": "bve", "planning_model": "consistent"}),

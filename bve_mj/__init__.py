@@ -13,13 +13,14 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from bve_mj.campaigns.paper import run_synthetic, run_table
     from bve_mj.config import Settings, describe, load_settings, settings_from_dict
-    from bve_mj.episode import EpisodeResult, ViewRecord, run_episode
+    from bve_mj.config.experiments import EXPERIMENTS, Experiment
     from bve_mj.errors import BveError, ConfigError, EstimationError, PlanningError
     from bve_mj.estimation import Belief, CameraModel, RangeModel, predict, update
-    from bve_mj.experiments import EXPERIMENTS, Experiment, run_synthetic, run_table
     from bve_mj.geometry import camera_rotation, look_at_pose
-    from bve_mj.mujoco_episode import MujocoEpisode, run_mujoco_episode
+    from bve_mj.loop.episode import EpisodeResult, ViewRecord, run_episode
+    from bve_mj.loop.mujoco import MujocoEpisode, run_mujoco_episode
     from bve_mj.planning import BvePlanner, CirclePlanner, RandomPlanner, ViewPlan, make_planner
     from bve_mj.sim import Scenario, SyntheticWorld
 
@@ -27,12 +28,13 @@ __version__ = "0.1.0"
 
 _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("Settings", "describe", "load_settings", "settings_from_dict"), "bve_mj.config"),
-    **dict.fromkeys(("EpisodeResult", "ViewRecord", "run_episode"), "bve_mj.episode"),
+    **dict.fromkeys(("EpisodeResult", "ViewRecord", "run_episode"), "bve_mj.loop.episode"),
     **dict.fromkeys(("BveError", "ConfigError", "EstimationError", "PlanningError"), "bve_mj.errors"),
     **dict.fromkeys(("Belief", "CameraModel", "RangeModel", "predict", "update"), "bve_mj.estimation"),
-    **dict.fromkeys(("EXPERIMENTS", "Experiment", "run_synthetic", "run_table"), "bve_mj.experiments"),
+    **dict.fromkeys(("EXPERIMENTS", "Experiment"), "bve_mj.config.experiments"),
+    **dict.fromkeys(("run_synthetic", "run_table"), "bve_mj.campaigns.paper"),
     **dict.fromkeys(("camera_rotation", "look_at_pose"), "bve_mj.geometry"),
-    **dict.fromkeys(("MujocoEpisode", "run_mujoco_episode"), "bve_mj.mujoco_episode"),
+    **dict.fromkeys(("MujocoEpisode", "run_mujoco_episode"), "bve_mj.loop.mujoco"),
     **dict.fromkeys(
         ("BvePlanner", "CirclePlanner", "RandomPlanner", "ViewPlan", "make_planner"), "bve_mj.planning"
     ),

@@ -18,10 +18,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from bve_mj.atomic import write_json_atomic
+from bve_mj.reporting.atomic import write_json_atomic
 
 if TYPE_CHECKING:
-    from bve_mj.campaign import CampaignSpec
+    from bve_mj.campaigns.spec import CampaignSpec
     from bve_mj.config import Settings
 
 __all__ = ["main"]
@@ -344,8 +344,7 @@ def _given(**values: object) -> dict[str, object]:
 def paper_settings(args: argparse.Namespace) -> Settings:
     """``bve-mj paper``'s settings: the ``--config`` file (or the defaults), then the options
     given on the command line, resolved for the synthetic world."""
-    from bve_mj.config import Settings, load_settings
-    from bve_mj.experiments import with_overrides
+    from bve_mj.config import Settings, load_settings, with_overrides
 
     settings = load_settings(args.config) if args.config else Settings()
     settings = with_overrides(
@@ -361,10 +360,9 @@ def paper_settings(args: argparse.Namespace) -> Settings:
 
 def episode_cli_settings(args: argparse.Namespace) -> Settings:
     """``bve-mj episode``'s settings: the ``--config`` file (or the defaults), then the options
-    given on the command line. :func:`bve_mj.mujoco_episode.run_mujoco_episode` resolves the
+    given on the command line. :func:`bve_mj.loop.mujoco.run_mujoco_episode` resolves the
     closed loop's defaults, the same for the CLI and the Python API."""
-    from bve_mj.config import SensorConfig, Settings, load_settings
-    from bve_mj.experiments import with_overrides
+    from bve_mj.config import SensorConfig, Settings, load_settings, with_overrides
 
     settings = load_settings(args.config) if args.config else Settings()
     settings = with_overrides(
@@ -388,9 +386,9 @@ def episode_cli_settings(args: argparse.Namespace) -> Settings:
 def campaign_inputs(args: argparse.Namespace) -> tuple[Settings, CampaignSpec]:
     """``bve-mj campaign``/``recoverability``: the settings (file, then ``--steps``/``--views``)
     and the spec; axes not given take each world's value from the settings."""
-    from bve_mj.campaign import CampaignSpec, parse_grid
-    from bve_mj.config import Settings, load_settings
-    from bve_mj.experiments import parse_experiments, with_overrides
+    from bve_mj.campaigns.spec import CampaignSpec, parse_grid
+    from bve_mj.config import Settings, load_settings, with_overrides
+    from bve_mj.config.experiments import parse_experiments
 
     settings = load_settings(args.config) if args.config else Settings()
     settings = with_overrides(
@@ -414,13 +412,9 @@ def campaign_inputs(args: argparse.Namespace) -> tuple[Settings, CampaignSpec]:
 
 
 def _cmd_paper(args: argparse.Namespace) -> int:
+    from bve_mj.campaigns.paper import run_table, table_json
     from bve_mj.config import describe
-    from bve_mj.experiments import (
-        PAPER_RESULTS,
-        parse_experiments,
-        run_table,
-        table_json,
-    )
+    from bve_mj.config.experiments import PAPER_RESULTS, parse_experiments
 
     experiments = parse_experiments(args.experiments)
     runs = _int_arg("runs", args.runs, 1) or 100
@@ -467,15 +461,15 @@ def _cmd_episode(args: argparse.Namespace) -> int:
         raise ConfigError("video", args.video, "a path ending in .mp4")
     plots_prefix = _check_output_path("plots", args.plots)
     if plots_prefix is not None:
-        from bve_mj.plots import require_matplotlib
+        from bve_mj.reporting.plots import require_matplotlib
 
         require_matplotlib("plots", args.plots)
     settings = episode_cli_settings(args)
 
     import numpy as np
 
-    from bve_mj.mujoco_episode import run_mujoco_episode
-    from bve_mj.video import EpisodeRecorder
+    from bve_mj.loop.mujoco import run_mujoco_episode
+    from bve_mj.reporting.video import EpisodeRecorder
 
     recorder = EpisodeRecorder(video_path) if video_path is not None else None
     try:
@@ -531,7 +525,7 @@ def _cmd_episode(args: argparse.Namespace) -> int:
     if video_path is not None:
         print(f"wrote {video_path} ({frames} frames)")
     if plots_prefix is not None:
-        from bve_mj.plots import plot_episode
+        from bve_mj.reporting.plots import plot_episode
 
         for p in plot_episode(doc, plots_prefix):
             print(f"wrote {p}")
@@ -578,8 +572,8 @@ def _float_arg(name: str, text: str | None, minimum: float, strict: bool = False
 
 
 def _cmd_campaign(args: argparse.Namespace) -> int:
-    from bve_mj.campaign import run_campaign
-    from bve_mj.campaign_report import format_cells, write_campaign_outputs
+    from bve_mj.campaigns.runner import run_campaign
+    from bve_mj.reporting.campaign_report import format_cells, write_campaign_outputs
 
     workers = _int_arg("workers", args.workers, 1)
     settings, spec = campaign_inputs(args)
@@ -628,11 +622,11 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
 
 
 def _cmd_results(args: argparse.Namespace) -> int:
-    from bve_mj.campaign import parse_grid
+    from bve_mj.campaigns.spec import parse_grid
     from bve_mj.config import Settings
+    from bve_mj.config.experiments import parse_experiments
     from bve_mj.errors import ConfigError
-    from bve_mj.experiments import parse_experiments
-    from bve_mj.results_page import PageOptions, build_results_page
+    from bve_mj.reporting.results_page import PageOptions, build_results_page
 
     grid = parse_grid(args.recover_grid)
     options = PageOptions(
@@ -652,7 +646,7 @@ def _cmd_results(args: argparse.Namespace) -> int:
     work = Path(args.work)
     if work.exists() and not work.is_dir():
         raise ConfigError("work", args.work, "a directory (a file is there)")
-    from bve_mj.plots import require_matplotlib
+    from bve_mj.reporting.plots import require_matplotlib
 
     require_matplotlib()
     show = not args.quiet and sys.stderr.isatty()
@@ -666,9 +660,9 @@ def _cmd_results(args: argparse.Namespace) -> int:
 
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
+    from bve_mj.campaigns.metrics import consistency_curve
+    from bve_mj.campaigns.scenarios import format_suite, load_suite, run_suite, suite_json
     from bve_mj.errors import ConfigError
-    from bve_mj.metrics import consistency_curve
-    from bve_mj.scenarios import format_suite, load_suite, run_suite, suite_json
 
     seeds = _int_arg("seeds", args.seeds, 1) or 1
     seed = _int_arg("seed", args.seed, 0) or 0
@@ -678,7 +672,7 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     if plot_path is not None:
         if plot_path.suffix.lower() != ".png":
             raise ConfigError("plot", args.plot, "a path ending in .png")
-        from bve_mj.plots import require_matplotlib
+        from bve_mj.reporting.plots import require_matplotlib
 
         require_matplotlib("plot", args.plot)
     if args.measurement is not None and args.measurement not in ("camera", "range"):
@@ -699,7 +693,7 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
         print(line)
     print(f"wall time {result.wall_s:.1f} s")
     if plot_path is not None:
-        from bve_mj.plots import plot_consistency
+        from bve_mj.reporting.plots import plot_consistency
 
         curves = {name: s["consistency"] for name, s in summaries.items()}
         curves["all"] = consistency_curve(
@@ -723,9 +717,9 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from bve_mj.calibration import calibrate
+    from bve_mj.campaigns.calibration import calibrate
+    from bve_mj.campaigns.scenarios import load_suite
     from bve_mj.errors import ConfigError
-    from bve_mj.scenarios import load_suite
 
     scenes = _int_arg("scenes", args.scenes, 1) or 1
     views = _int_arg("views", args.views, 1) or 1

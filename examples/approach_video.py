@@ -16,9 +16,9 @@ import imageio.v2 as imageio
 import numpy as np
 
 from bve_mj import Settings
-from bve_mj.experiments import with_overrides
-from bve_mj.mujoco_episode import run_mujoco_episode
-from bve_mj.video import EpisodeRecorder
+from bve_mj.config import with_overrides
+from bve_mj.loop.mujoco import run_mujoco_episode
+from bve_mj.reporting.video import EpisodeRecorder
 
 
 def main(out_dir: str = "out", seed: int = 1) -> None:

@@ -14,8 +14,9 @@ from __future__ import annotations
 import sys
 
 from bve_mj import Settings
-from bve_mj.campaign import CampaignSpec, run_campaign
-from bve_mj.campaign_report import format_cells, write_campaign_outputs
+from bve_mj.campaigns.runner import run_campaign
+from bve_mj.campaigns.spec import CampaignSpec
+from bve_mj.reporting.campaign_report import format_cells, write_campaign_outputs
 
 
 def main(out: str = "out/campaign_example", runs: int = 5) -> None:

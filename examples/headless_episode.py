@@ -10,7 +10,7 @@ import sys
 import numpy as np
 
 from bve_mj import Settings
-from bve_mj.mujoco_episode import run_mujoco_episode
+from bve_mj.loop.mujoco import run_mujoco_episode
 
 
 def main(seed: int = 0) -> None:

@@ -9,7 +9,7 @@ import sys
 
 from bve_mj import EXPERIMENTS, Settings, run_table
 from bve_mj.cli import format_table
-from bve_mj.experiments import PAPER_RESULTS
+from bve_mj.config.experiments import PAPER_RESULTS
 
 
 def main(runs: int = 20) -> None:

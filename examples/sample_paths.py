@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from bve_mj import EXPERIMENTS, Belief, Settings, SyntheticWorld, make_planner, run_episode
-from bve_mj.experiments import sample_scenario, with_overrides
-from bve_mj.plots import plot_sample_paths
+from bve_mj.config import with_overrides
+from bve_mj.loop.synthetic import sample_scenario
+from bve_mj.reporting.plots import plot_sample_paths
 
 
 def main(out_dir: str = "out") -> None:

@@ -16,12 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bve_mj.campaign import CampaignSpec, Cell, RunStore, parse_grid, run_campaign
-from bve_mj.campaign_report import summary_document, write_campaign_outputs
+from bve_mj.campaigns.runner import run_campaign
+from bve_mj.campaigns.spec import CampaignSpec, Cell, parse_grid
+from bve_mj.campaigns.store import RunStore
 from bve_mj.cli import main
-from bve_mj.config import Settings
+from bve_mj.config import Settings, with_overrides
 from bve_mj.errors import ConfigError
-from bve_mj.experiments import with_overrides
+from bve_mj.reporting.campaign_report import summary_document, write_campaign_outputs
 
 TIMING = {"wall_s", "plan_ms_median"}
 SMALL = Settings()
@@ -131,7 +132,7 @@ def test_store_refuses_other_settings_and_unreadable_files(tmp_path: Path) -> No
 def test_the_store_records_the_code_and_a_resume_under_other_code_says_so(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from bve_mj.campaign import code_identity
+    from bve_mj.campaigns.store import code_identity
 
     code = code_identity()
     assert code["version"] and code["commit"]
@@ -161,7 +162,7 @@ def test_the_store_records_the_code_and_a_resume_under_other_code_says_so(
 
 
 def test_a_crashing_run_is_recorded_and_retried(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import bve_mj.campaign as campaign
+    import bve_mj.campaigns.executors as campaign
 
     real = campaign.run_cell
 
@@ -269,7 +270,7 @@ def test_recoverability_cli_and_mujoco_rows_reproduce_as_episodes(
     out = capsys.readouterr().out
     assert "synthetic E1 bve range e0=0.3 m" in out
     # MuJoCo: one run; its row's episode seed replays it exactly
-    from bve_mj.mujoco_episode import run_mujoco_episode
+    from bve_mj.loop.mujoco import run_mujoco_episode
 
     spec = CampaignSpec(experiments=("E5",), worlds=("mujoco",), measurements=("camera",), runs=1, seed=4)
     settings = with_overrides(Settings(), episode={"views": 4})

@@ -148,7 +148,7 @@ def test_episode_config_measurement_reaches_the_run(tmp_path, capsys):
 def test_api_default_episode_is_the_cli_episode(tmp_path):
     from threadpoolctl import threadpool_limits
 
-    from bve_mj.mujoco_episode import run_mujoco_episode
+    from bve_mj.loop.mujoco import run_mujoco_episode
 
     out = tmp_path / "ep.json"
     assert main(["episode", "--seed", "3", "--json", str(out), "--quiet"]) in (0, 3)

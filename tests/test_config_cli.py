@@ -17,8 +17,8 @@ from bve_mj.config import (
     load_settings,
     settings_from_dict,
 )
+from bve_mj.config.experiments import parse_experiments
 from bve_mj.errors import BveError, ConfigError
-from bve_mj.experiments import parse_experiments
 
 
 @pytest.mark.parametrize(

@@ -8,12 +8,11 @@ import numpy as np
 import pytest
 
 from bve_mj.cli import main
-from bve_mj.config import Settings
-from bve_mj.experiments import with_overrides
-from bve_mj.mujoco_episode import run_mujoco_episode
+from bve_mj.config import Settings, with_overrides
+from bve_mj.loop.mujoco import run_mujoco_episode
+from bve_mj.reporting.video import EpisodeRecorder
 from bve_mj.robot import arm_kinematics
 from bve_mj.sim.scene import Fruit
-from bve_mj.video import EpisodeRecorder
 
 CAMERA = with_overrides(Settings(), measurement={"kind": "camera"})
 
@@ -126,8 +125,8 @@ def test_approach_arrives_or_says_why_not(seed):
 def test_a_camera_that_stops_moving_ends_the_episode():
     """Repeating one view fuses the same errors again: the loop stops ("stalled") instead of
     taking all its views, and "approach_blocked" in approach mode."""
-    from bve_mj.episode import StopRules, ViewRecord
     from bve_mj.estimation.belief import Belief
+    from bve_mj.loop.episode import StopRules, ViewRecord
 
     def view(i, p):
         b = Belief(np.zeros(3), np.eye(3) * 1e-2)  # far from converged
@@ -145,8 +144,8 @@ def test_a_camera_that_stops_moving_ends_the_episode():
 def test_an_estimate_that_stops_moving_on_accepted_views_is_stable():
     """ "stable": the estimate moved less than stable_m over stable_views views, each with an
     accepted measurement; a gated-out view is no agreement, and a moving estimate is not."""
-    from bve_mj.episode import StopRules, ViewRecord
     from bve_mj.estimation.belief import Belief
+    from bve_mj.loop.episode import StopRules, ViewRecord
 
     def view(i, x, accepted=True):
         b = Belief(np.array([x, 0.0, 0.2]), np.eye(3) * 1e-4)  # σ 10 mm: not converged
@@ -217,8 +216,8 @@ def test_two_gated_out_views_that_agree_on_another_answer_end_unreliable(later, 
     prior allows, and the gate rejects them: the evidence holds two answers, so the episode
     says so (``unreliable``) instead of claiming the first (a truss episode did: NEES 176)."""
     from bve_mj.config import FilterConfig
-    from bve_mj.episode import run_episode
     from bve_mj.estimation.belief import Belief
+    from bve_mj.loop.episode import run_episode
 
     first = [0.40, 0.0, 0.20]
     world = _Scripted([first, first, first, later, later])

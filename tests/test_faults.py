@@ -9,14 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bve_mj.campaign import CampaignSpec, run_campaign
+from bve_mj.campaigns.runner import run_campaign
+from bve_mj.campaigns.spec import CampaignSpec
 from bve_mj.cli import main
-from bve_mj.config import _SECTIONS, FaultConfig, Settings, load_settings, settings_from_dict
-from bve_mj.episode import run_episode
+from bve_mj.config import SECTIONS, FaultConfig, Settings, load_settings, settings_from_dict, with_overrides
+from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.errors import ConfigError, EstimationError
 from bve_mj.estimation.belief import Belief
-from bve_mj.experiments import EXPERIMENTS, sample_scenario, with_overrides
-from bve_mj.faults import FaultyPlanner, FaultyWorld
+from bve_mj.loop.episode import run_episode
+from bve_mj.loop.faults import FaultyPlanner, FaultyWorld
+from bve_mj.loop.synthetic import sample_scenario
 from bve_mj.planning import make_planner
 from bve_mj.robot.description import ROBOTS
 from bve_mj.robot.kinematics import ArmKinematics
@@ -27,11 +29,11 @@ REPO = Path(__file__).resolve().parents[1]
 BAD_VALUES = ["x", [1, 2], {"a": 1}, float("nan"), float("inf"), -1e9, True]
 
 
-@pytest.mark.parametrize("section", list(_SECTIONS))
+@pytest.mark.parametrize("section", list(SECTIONS))
 def test_every_setting_rejects_wrong_types_and_ranges_by_name(section: str) -> None:
     """Each field of each section, given values of the wrong type or range: a ConfigError
     naming the field, never another exception (pairs and lists may legitimately take [1, 2])."""
-    cls = _SECTIONS[section]
+    cls = SECTIONS[section]
     for f in dataclasses.fields(cls):
         rejected = 0
         for bad in BAD_VALUES:
@@ -227,7 +229,7 @@ def test_fault_injection_suite_60_mujoco_episodes(tmp_path: Path) -> None:
 def test_a_second_red_blob_in_the_rendered_scene_does_not_capture_the_estimate(kind: str) -> None:
     import mujoco
 
-    from bve_mj.mujoco_episode import run_mujoco_episode
+    from bve_mj.loop.mujoco import run_mujoco_episode
     from bve_mj.sim.scene import Fruit
 
     target = Fruit("target", np.array([0.42, 0.0, 0.2]), 0.033, "red")

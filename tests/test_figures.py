@@ -21,10 +21,11 @@ matplotlib.use("Agg")
 from matplotlib.lines import Line2D
 from matplotlib.text import Text
 
-import bve_mj.plots as plots
-from bve_mj.campaign import CampaignResult, CampaignSpec, Cell
-from bve_mj.campaign_report import plot_campaign
+import bve_mj.reporting.plots as plots
+from bve_mj.campaigns.runner import CampaignResult
+from bve_mj.campaigns.spec import CampaignSpec, Cell
 from bve_mj.config import Settings
+from bve_mj.reporting.campaign_report import plot_campaign
 
 
 def _row(cell: Cell, run: int, rng: np.random.Generator, still: bool = False) -> dict[str, Any]:
@@ -143,7 +144,7 @@ def test_error_by_view_draws_every_cell_in_a_panel_per_world_and_experiment(
 
 
 def test_many_panels_are_capped_with_a_title_that_says_so(tmp_path: Path, figures: dict[str, Any]) -> None:
-    import bve_mj.campaign_report as report
+    import bve_mj.reporting.campaign_report as report
 
     cells = [Cell("synthetic", f"E{i}", "bve", "range", 0.1) for i in range(1, 11)]
     result = _result(tmp_path, cells, runs=1)
@@ -225,7 +226,7 @@ def test_wrap_title_fits_the_width() -> None:
 
 
 def test_video_framing_and_projection() -> None:
-    from bve_mj.video import _axes, _frame, _View
+    from bve_mj.reporting.video import _axes, _frame, _View
 
     rng = np.random.default_rng(1)
     pts = np.array([0.4, 0.0, 0.3]) + rng.uniform(-0.15, 0.15, (30, 3))
@@ -249,7 +250,7 @@ def test_eye_overlay_says_which_range_is_measured_and_which_true(monkeypatch: py
     import cv2
 
     from bve_mj.perception.detector import Detection, NoDetection
-    from bve_mj.video import draw_detection
+    from bve_mj.reporting.video import draw_detection
 
     written: list[str] = []
     real = cv2.putText

@@ -4,9 +4,9 @@ than the greedy roll-out it starts from."""
 import numpy as np
 import pytest
 
-from bve_mj.config import Settings
+from bve_mj.config import Settings, with_overrides
+from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.estimation import Belief
-from bve_mj.experiments import EXPERIMENTS, with_overrides
 from bve_mj.planning import BvePlanner, CameraInformation, max_violation
 from bve_mj.planning.horizon import ChainedStep, HorizonObjective, horizon_constraints
 from bve_mj.planning.information import SizeInformation

@@ -5,9 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from bve_mj.config import Settings
+from bve_mj.campaigns.paper import run_synthetic
+from bve_mj.config import Settings, with_overrides
+from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.estimation import Belief
-from bve_mj.experiments import EXPERIMENTS, run_synthetic, with_overrides
 from bve_mj.planning import build_constraints
 from bve_mj.robot import ArmKinematics, KinematicBvePlanner, get_robot, look_at_ik
 

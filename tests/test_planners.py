@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from bve_mj.config import Settings
+from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.estimation import Belief
-from bve_mj.experiments import EXPERIMENTS
 from bve_mj.planning import BvePlanner, CirclePlanner, RandomPlanner, StepLimit, build_constraints
 
 TOL = 1e-6

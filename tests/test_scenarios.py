@@ -9,11 +9,11 @@ import mujoco
 import numpy as np
 import pytest
 
+from bve_mj.campaigns.scenarios import SILENT_NEES, load_suite, run_suite, suite_dir, suite_json
 from bve_mj.cli import main
 from bve_mj.config import EpisodeConfig
-from bve_mj.mujoco_episode import detection_prior, run_mujoco_episode
+from bve_mj.loop.mujoco import detection_prior, run_mujoco_episode
 from bve_mj.robot import arm_kinematics
-from bve_mj.scenarios import SILENT_NEES, load_suite, run_suite, suite_dir, suite_json
 from bve_mj.sim.scene import build_scene
 
 REQUIRED = {

@@ -9,12 +9,12 @@ import math
 import pytest
 
 from bve_mj.cli import main
-from bve_mj.config import _SECTIONS
+from bve_mj.config import SECTIONS
 
 hypothesis = pytest.importorskip("hypothesis")
 st = hypothesis.strategies
 
-FIELDS = [(section, f.name) for section, cls in _SECTIONS.items() for f in dataclasses.fields(cls)]
+FIELDS = [(section, f.name) for section, cls in SECTIONS.items() for f in dataclasses.fields(cls)]
 
 
 def _toml(value):

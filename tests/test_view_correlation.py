@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from bve_mj.config import CameraConfig, FilterConfig
-from bve_mj.episode import run_episode
 from bve_mj.estimation import BearingSizeModel, Belief
 from bve_mj.estimation.noise import fit_noise_model
 from bve_mj.estimation.view_correlation import (
@@ -18,6 +17,7 @@ from bve_mj.estimation.view_correlation import (
     new_view_share,
 )
 from bve_mj.geometry import camera_rotation
+from bve_mj.loop.episode import run_episode
 from bve_mj.planning.information import SizeInformation
 from bve_mj.planning.plan import ViewPlan
 from bve_mj.sim.world import Observation

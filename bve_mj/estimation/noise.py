@@ -2,7 +2,7 @@
 
 What the detector measures of a fruit, per view: the bearing of its centre (two image
 coordinates) and its apparent (equatorial) angular radius α, both in pixels (f · angle).
-Their errors, measured on rendered views against the truth (:mod:`bve_mj.calibration`):
+Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaigns.calibration`):
 
 - the apparent radius is **biased**: the outline the colour mask finds lies inside the true
   silhouette (the rim is darker and blends with what is behind it), by

@@ -19,11 +19,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, Protocol, get_args, runtime_checkable
+from typing import Protocol, get_args, runtime_checkable
 
 import numpy as np
 
 from bve_mj.config import Settings
+from bve_mj.config.fields import ConstraintName
 from bve_mj.errors import ConfigError
 
 __all__ = [
@@ -41,8 +42,6 @@ __all__ = [
     "check_constraint_names",
     "max_violation",
 ]
-
-ConstraintName = Literal["band", "workspace", "outside_fruit", "cone", "wall"]
 
 
 class Constraint(Protocol):

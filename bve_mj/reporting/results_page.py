@@ -21,13 +21,14 @@ from typing import Any
 
 import numpy as np
 
-from bve_mj.atomic import write_json_atomic, write_text_atomic
-from bve_mj.campaign import CampaignResult, CampaignSpec, Cell, run_campaign
-from bve_mj.campaign_report import cell_summary, plot_campaign, write_campaign_outputs
+from bve_mj.campaigns.runner import CampaignResult, run_campaign
+from bve_mj.campaigns.scenarios import format_suite, load_suite, run_suite, suite_json
+from bve_mj.campaigns.spec import CampaignSpec, Cell
 from bve_mj.config import Settings
+from bve_mj.config.experiments import EXPERIMENTS, PAPER_RESULTS
 from bve_mj.errors import ConfigError
-from bve_mj.experiments import EXPERIMENTS, PAPER_RESULTS
-from bve_mj.scenarios import format_suite, load_suite, run_suite, suite_json
+from bve_mj.reporting.atomic import write_json_atomic, write_text_atomic
+from bve_mj.reporting.campaign_report import cell_summary, plot_campaign, write_campaign_outputs
 
 __all__ = ["PageOptions", "build_results_page"]
 

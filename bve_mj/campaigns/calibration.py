@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
+from bve_mj.campaigns.scenarios import Scenario
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.noise import NoiseModel, fit_noise_model
-from bve_mj.scenarios import Scenario
 
 __all__ = ["CalibrationData", "calibrate", "run_calibration", "sample_views"]
 
@@ -174,7 +174,8 @@ def run_calibration(
     progress: Callable[[int, int], None] | None = None,
 ) -> CalibrationData:
     """``views`` views of ``scenes`` seeded scenes of every scenario, in spawned workers."""
-    from bve_mj.campaign import episode_seed, local_batches
+    from bve_mj.campaigns.executors import local_batches
+    from bve_mj.campaigns.spec import episode_seed
 
     for field, value, lo in (("scenes", scenes, 1), ("views", views, 1), ("seed", seed, 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < lo:

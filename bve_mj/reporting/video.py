@@ -24,8 +24,8 @@ import cv2
 import mujoco
 import numpy as np
 
-from bve_mj.episode import ViewRecord
 from bve_mj.estimation.belief import Belief
+from bve_mj.loop.episode import ViewRecord
 from bve_mj.perception.detector import Detection, NoDetection
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.scene import fruit_geom_name

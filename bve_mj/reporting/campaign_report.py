@@ -1,6 +1,6 @@
 """A campaign's outputs: per-cell metrics, ``runs.csv``, ``summary.json`` and plots.
 
-Everything here reads the rows of a :class:`~bve_mj.campaign.CampaignResult` and writes
+Everything here reads the rows of a :class:`~bve_mj.campaigns.runner.CampaignResult` and writes
 atomically, so an output file is always a whole one.
 """
 
@@ -16,11 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from bve_mj.atomic import write_json_atomic, write_text_atomic
-from bve_mj.campaign import CampaignResult, Cell
+from bve_mj.campaigns.metrics import consistency_metrics, euclidean_metrics, paper_metrics
+from bve_mj.campaigns.runner import CampaignResult
+from bve_mj.campaigns.spec import Cell
 from bve_mj.config import settings_to_dict
-from bve_mj.experiments import PAPER_RESULTS
-from bve_mj.metrics import consistency_metrics, euclidean_metrics, paper_metrics
+from bve_mj.config.experiments import PAPER_RESULTS
+from bve_mj.reporting.atomic import write_json_atomic, write_text_atomic
 
 __all__ = [
     "CSV_COLUMNS",
@@ -252,7 +253,7 @@ def plot_campaign(
     recoverability figure has a panel per sweep. A figure never drops a cell silently: beyond
     :data:`MAX_PANELS` panels its title says how many it shows.
     """
-    from bve_mj.plots import _pyplot, _save, draw_path, path_legend, wrap_title
+    from bve_mj.reporting.plots import _pyplot, _save, draw_path, path_legend, wrap_title
 
     plt = _pyplot()
     from matplotlib.ticker import MaxNLocator

@@ -14,14 +14,14 @@ from typing import Any, Protocol
 import mujoco
 import numpy as np
 
-from bve_mj.config import EpisodeConfig, Settings, settings_to_dict
-from bve_mj.episode import Claims, EpisodeResult, StopRules, ViewRecord, run_episode
+from bve_mj.config import EpisodeConfig, Settings, settings_to_dict, with_overrides
+from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.noise import load_noise_model
-from bve_mj.experiments import EXPERIMENTS, with_overrides
-from bve_mj.faults import FaultyPlanner, FaultyWorld
 from bve_mj.geometry import ray_frame
+from bve_mj.loop.episode import Claims, EpisodeResult, StopRules, ViewRecord, run_episode
+from bve_mj.loop.faults import FaultyPlanner, FaultyWorld
 from bve_mj.planning.constraints import ConstraintName
 from bve_mj.planning.plan import Planner
 from bve_mj.robot import ArmKinematics, IkOptions, arm_kinematics, look_at_ik, make_arm_planner
@@ -33,7 +33,7 @@ __all__ = ["MujocoEpisode", "Recorder", "episode_settings", "run_mujoco_episode"
 
 
 class Recorder(Protocol):
-    """What an episode recorder (``bve_mj.video.EpisodeRecorder``) offers the episode."""
+    """What an episode recorder (``bve_mj.reporting.video.EpisodeRecorder``) offers the episode."""
 
     def attach(self, world: MujocoWorld, prior: Belief) -> None: ...
 
@@ -99,9 +99,10 @@ class MujocoEpisode:
 
     def cramer_rao_mm(self) -> float:
         """√tr of the centre block of the Cramér-Rao bound of the views this episode fused
-        (:func:`bve_mj.metrics.cramer_rao_bound`: the prior, and each accepted view's model
+        (:func:`bve_mj.campaigns.metrics.cramer_rao_bound`: the prior, and each accepted view's model
         with the noise it was fused with, at the true state; calibration biases at 0) [mm];
         NaN when nothing was fused."""
+        from bve_mj.campaigns.metrics import cramer_rao_bound
         from bve_mj.estimation.models import (
             BearingSizeModel,
             CameraModel,
@@ -109,7 +110,6 @@ class MujocoEpisode:
             RangeModel,
             SizeModel,
         )
-        from bve_mj.metrics import cramer_rao_bound
 
         prior = self.result.prior
         camera = self.settings.measurement.kind in ("camera", "auto")
@@ -207,7 +207,7 @@ class MujocoEpisode:
 
 INNOVATION_PRIOR_DOF = 6.0
 """How much the noise model's word counts against a fruit's own innovations (degrees of
-freedom, :class:`bve_mj.episode.Claims`)."""
+freedom, :class:`bve_mj.loop.episode.Claims`)."""
 
 START_MARGIN = 0.15
 """A ready pose is taken once its joints all keep this share of their range from the limits."""

@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from bve_mj.atomic import atomic_path
-from bve_mj.episode import EpisodeResult
 from bve_mj.errors import ConfigError
+from bve_mj.loop.episode import EpisodeResult
+from bve_mj.reporting.atomic import atomic_path
 
 __all__ = [
     "draw_path",
@@ -258,7 +258,7 @@ def plot_episode(doc: dict[str, object], prefix: str | Path) -> tuple[Path, Path
 
 def plot_consistency(curves: dict[str, list[tuple[float, float]]], path: str | Path, title: str = "") -> Path:
     """The consistency plot: for each named curve (a scenario, a filter, ...; from
-    :func:`bve_mj.metrics.consistency_curve`), the share of episodes whose truth lies inside
+    :func:`bve_mj.campaigns.metrics.consistency_curve`), the share of episodes whose truth lies inside
     the final p-ellipsoid against p. An honest filter lies on the diagonal; below it, the
     covariance claims too much. Written as PNG to ``path``."""
     plt = _pyplot()

@@ -4,7 +4,7 @@ A scenario is a TOML file of settings (sections of :class:`bve_mj.config.Setting
 suite's folder, ``examples/scenarios/suite/`` in a checkout (installed as data beside the
 models otherwise); its name is the file's stem and its first comment lines describe it.
 Every scenario runs ``seeds`` MuJoCo episodes, episode ``i`` seeded
-:func:`bve_mj.campaign.episode_seed` ``(seed, i)`` (``bve-mj episode --config FILE --seed
+:func:`bve_mj.campaigns.spec.episode_seed` ``(seed, i)`` (``bve-mj episode --config FILE --seed
 <it>`` replays it), spread over spawned worker processes.
 
 Per scenario: outcome counts, final error median / p95 / max, mean NEES, the share of truths
@@ -27,10 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from bve_mj.campaign import episode_seed, local_batches, radius_metrics
+from bve_mj.campaigns.executors import local_batches
+from bve_mj.campaigns.metrics import consistency_curve, nees_band
+from bve_mj.campaigns.runs import radius_metrics
+from bve_mj.campaigns.spec import episode_seed
 from bve_mj.config import FilterKind, MeasurementKind, Settings, StateKind, load_settings, settings_to_dict
 from bve_mj.errors import BveError, ConfigError
-from bve_mj.metrics import consistency_curve, nees_band
 
 __all__ = [
     "SILENT_NEES",
@@ -66,7 +68,7 @@ class Scenario:
     ) -> Settings:
         """The file's settings for the closed loop (each argument given overrides the file's
         ``measurement.kind``, ``filter.kind``, ``filter.state``)."""
-        from bve_mj.experiments import with_overrides
+        from bve_mj.config import with_overrides
 
         s = load_settings(self.path)
         given: dict[str, object] = {
@@ -81,7 +83,7 @@ class Scenario:
 def suite_dir() -> Path:
     """The suite's folder: ``examples/scenarios/suite`` beside the package in a checkout, or
     the installed data (``share/bve_mj/scenarios``)."""
-    here = Path(__file__).resolve().parents[1] / "examples" / "scenarios" / "suite"
+    here = Path(__file__).resolve().parents[2] / "examples" / "scenarios" / "suite"
     for c in (here, Path(sysconfig.get_path("data")) / "share" / "bve_mj" / "scenarios"):
         if c.is_dir() and any(c.glob("*.toml")):
             return c
@@ -122,7 +124,7 @@ Task = tuple[str, Settings, int, tuple[int, ...]]
 
 
 def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, Any]:
-    from bve_mj.mujoco_episode import run_mujoco_episode
+    from bve_mj.loop.mujoco import run_mujoco_episode
 
     ep_seed = episode_seed(seed, run)
     try:

@@ -1,0 +1,84 @@
+"""Where runs execute: in this process, in a pool of spawned processes, or on a Dask cluster."""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from typing import Any, TypeVar
+
+from bve_mj.campaigns.runs import _failed_row, run_cell
+from bve_mj.campaigns.spec import Cell
+from bve_mj.config import Settings
+from bve_mj.errors import ConfigError
+
+# --------------------------------------------------------------------------- execution
+Task = tuple[Settings, tuple[tuple[Cell, int], ...], int]
+
+
+T = TypeVar("T")
+
+
+def _run_task(task: Task) -> list[dict[str, Any]]:
+    """Run a chunk; a run that crashes (a bug, not bad input) becomes a "crashed" row so
+    that one bad run never takes down the other thousands (stored, retried on resume)."""
+    from bve_mj.threads import one_blas_thread
+
+    settings, items, seed = task
+    rows = []
+    # one BLAS thread: the same result in-process, in a local pool and on a Dask worker
+    with one_blas_thread():
+        for cell, run in items:
+            try:
+                rows.append(run_cell(settings, cell, seed, run))
+            except Exception as exc:
+                rows.append(_failed_row(cell, seed, run, "crashed", f"{type(exc).__name__}: {exc}"))
+    return rows
+
+
+def local_batches(
+    run: Callable[[T], list[dict[str, Any]]], tasks: Sequence[T], workers: int
+) -> Iterator[list[dict[str, Any]]]:
+    """``run(task)`` for every task, in this process (``workers`` = 1) or in a pool of
+    spawned processes, yielding each task's rows as it finishes."""
+    if workers == 1:
+        yield from map(run, tasks)
+        return
+    # spawn, not fork: a forked child inherits the parent's EGL/OpenGL state and can deadlock
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    try:
+        pending: set[Future[list[dict[str, Any]]]] = {pool.submit(run, t) for t in tasks}
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                yield fut.result()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _dask_batches(tasks: list[Task], scheduler: str) -> Iterator[list[dict[str, Any]]]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise ConfigError(
+            "scheduler", scheduler, "a Dask scheduler with dask installed: pip install 'bve_mj[dask]'"
+        ) from None
+    try:
+        client = Client(scheduler, timeout="5s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        allowed = f"the address of a running Dask scheduler ({exc})"
+        raise ConfigError("scheduler", scheduler, allowed) from None
+    try:
+        futures = client.map(_run_task, tasks, pure=False)
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        client.close()
+
+
+def _chunks(items: list[tuple[Cell, int]], workers: int) -> list[tuple[tuple[Cell, int], ...]]:
+    mujoco = [it for it in items if it[0].world == "mujoco"]
+    synthetic = [it for it in items if it[0].world != "mujoco"]
+    size = max(1, min(10, len(synthetic) // max(1, 4 * workers)))
+    out = [tuple(synthetic[i : i + size]) for i in range(0, len(synthetic), size)]
+    return out + [(it,) for it in mujoco]

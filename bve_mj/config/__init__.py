@@ -1,0 +1,89 @@
+"""Settings: frozen, keyword-only dataclasses, validated on construction, loadable from TOML.
+
+The parameters the paper leaves open (Σc, Q, initial P, r_k, HFOV, steps per run) are chosen
+here, once, each with its reason in the field's ``why`` metadata. :func:`describe` prints
+them beside every result, so a table never travels without the settings that made it.
+
+Units are in the names: ``_m`` metres, ``_rad`` radians, ``_px`` pixels, ``_m2`` square
+metres.
+
+Sections by part: :mod:`.sensing` (camera, fruit prior, measurement, filter),
+:mod:`.planning` (constraints, planner, protocol, robot), :mod:`.scene` (scene, sensors),
+:mod:`.episode` (detector, faults, episode); :mod:`.settings` holds them all, loads and
+describes them; the allowed values of every choice are defined once, in :mod:`.fields`.
+"""
+
+from __future__ import annotations
+
+from bve_mj.config.episode import DetectorConfig, EpisodeConfig, FaultConfig
+from bve_mj.config.fields import (
+    ConstraintName,
+    FilterKind,
+    Formulation,
+    FruitType,
+    LossName,
+    MeasurementKind,
+    OptimiserName,
+    OtherTrussesRipeness,
+    PlannerKind,
+    PlanningModel,
+    PriorSource,
+    RipenessName,
+    RobotName,
+    StateKind,
+    TrussLayout,
+    WorldName,
+)
+from bve_mj.config.planning import ConstraintConfig, PlannerConfig, ProtocolConfig, RobotConfig
+from bve_mj.config.scene import FRUIT_TYPE_DIAMETER_M, FRUIT_TYPE_SHAPE_INDEX, SceneConfig, SensorConfig
+from bve_mj.config.sensing import CameraConfig, FilterConfig, FruitPrior, MeasurementConfig
+from bve_mj.config.settings import (
+    SECTIONS,
+    Settings,
+    describe,
+    load_settings,
+    settings_from_dict,
+    settings_to_dict,
+    with_overrides,
+)
+
+__all__ = [
+    "FRUIT_TYPE_DIAMETER_M",
+    "FRUIT_TYPE_SHAPE_INDEX",
+    "SECTIONS",
+    "CameraConfig",
+    "ConstraintConfig",
+    "ConstraintName",
+    "DetectorConfig",
+    "EpisodeConfig",
+    "FaultConfig",
+    "FilterConfig",
+    "FilterKind",
+    "Formulation",
+    "FruitPrior",
+    "FruitType",
+    "LossName",
+    "MeasurementConfig",
+    "MeasurementKind",
+    "OptimiserName",
+    "OtherTrussesRipeness",
+    "PlannerConfig",
+    "PlannerKind",
+    "PlanningModel",
+    "PriorSource",
+    "ProtocolConfig",
+    "RipenessName",
+    "RobotConfig",
+    "RobotName",
+    "SceneConfig",
+    "SensorConfig",
+    "Settings",
+    "StateKind",
+    "TrussLayout",
+    "WorldName",
+    "describe",
+    "load_settings",
+    "settings_from_dict",
+    "settings_to_dict",
+    "with_overrides",
+]
