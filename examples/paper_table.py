@@ -8,8 +8,8 @@ from __future__ import annotations
 import sys
 
 from bve_mj import EXPERIMENTS, Settings, run_table
-from bve_mj.cli import format_table
 from bve_mj.config.experiments import PAPER_RESULTS
+from bve_mj.reporting.tables import format_table
 
 
 def main(runs: int = 20) -> None:

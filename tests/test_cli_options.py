@@ -8,7 +8,11 @@ import json
 import numpy as np
 import pytest
 
-from bve_mj.cli import _build_parser, campaign_inputs, episode_cli_settings, main, paper_settings
+from bve_mj.cli import main
+from bve_mj.cli.campaign import campaign_inputs
+from bve_mj.cli.episode import episode_cli_settings
+from bve_mj.cli.paper import paper_settings
+from bve_mj.cli.parser import build_parser
 from bve_mj.config import SensorConfig, Settings, load_settings
 
 # (option, value on the command line, section.field it sets, its value there, a file value)
@@ -60,7 +64,7 @@ def test_paper_option_overrides_the_file_only_when_given(tmp_path, option, text,
     _non_default(dotted, in_file)
     assert value != in_file
     config = _file(tmp_path, dotted, in_file)
-    parser = _build_parser()
+    parser = build_parser()
     kept = paper_settings(parser.parse_args(["paper", "--config", config]))
     assert _get(kept, dotted) == in_file
     won = paper_settings(parser.parse_args(["paper", "--config", config, option, text]))
@@ -72,14 +76,14 @@ def test_episode_option_overrides_the_file_only_when_given(tmp_path, option, tex
     _non_default(dotted, in_file)
     assert value != in_file
     config = _file(tmp_path, dotted, in_file)
-    parser = _build_parser()
+    parser = build_parser()
     assert _get(episode_cli_settings(parser.parse_args(["episode", "--config", config])), dotted) == in_file
     won = episode_cli_settings(parser.parse_args(["episode", "--config", config, option, text]))
     assert _get(won, dotted) == value
 
 
 def test_episode_flags_keep_the_file_and_win_when_given(tmp_path):
-    parser = _build_parser()
+    parser = build_parser()
     approach = _file(tmp_path, "episode.approach", True)
     assert episode_cli_settings(parser.parse_args(["episode", "--config", approach])).episode.approach
     plain = episode_cli_settings(parser.parse_args(["episode"]))
@@ -95,7 +99,7 @@ def test_episode_flags_keep_the_file_and_win_when_given(tmp_path):
 def test_campaign_option_overrides_the_file_only_when_given(tmp_path, option, text, dotted, value, in_file):
     _non_default(dotted, in_file)
     config = _file(tmp_path, dotted, in_file)
-    parser = _build_parser()
+    parser = build_parser()
     base = ["campaign", "--out", str(tmp_path / "c"), "--config", config]
     assert _get(campaign_inputs(parser.parse_args(base))[0], dotted) == in_file
     assert _get(campaign_inputs(parser.parse_args([*base, option, text]))[0], dotted) == value
@@ -103,7 +107,7 @@ def test_campaign_option_overrides_the_file_only_when_given(tmp_path, option, te
 
 def test_campaign_axes_follow_the_file_unless_given(tmp_path):
     """--measurements, --initial-errors and --approach default to each world's settings."""
-    parser = _build_parser()
+    parser = build_parser()
     out = ["--out", str(tmp_path / "c"), "--experiments", "E1"]
     settings, spec = campaign_inputs(parser.parse_args(["campaign", *out, "--worlds", "synthetic,mujoco"]))
     cells = spec.cells(settings)
@@ -129,7 +133,7 @@ def test_a_scenario_can_name_another_arm(tmp_path):
     """joint_limits follows the arm unless set: a scenario naming panda gets panda's limits."""
     config = tmp_path / "panda.toml"
     config.write_text('[robot]\nname = "panda"\n')
-    settings = episode_cli_settings(_build_parser().parse_args(["episode", "--config", str(config)]))
+    settings = episode_cli_settings(build_parser().parse_args(["episode", "--config", str(config)]))
     assert settings.robot.name == "panda" and settings.robot.limit_set == "urdf"
     assert Settings().robot.limit_set == "emanual"
 
@@ -163,7 +167,7 @@ def test_api_default_episode_is_the_cli_episode(tmp_path):
 
 def test_version(capsys):
     with pytest.raises(SystemExit) as info:
-        _build_parser().parse_args(["--version"])
+        build_parser().parse_args(["--version"])
     assert info.value.code == 0
     assert capsys.readouterr().out.startswith("bve-mj ")
 

@@ -1,0 +1,129 @@
+"""What the commands share: exit statuses, one-line usage errors, argument checks, progress."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, NoReturn
+
+if TYPE_CHECKING:
+    pass
+
+
+EXIT_OK = 0
+
+
+EXIT_FAILURE = 1
+
+
+EXIT_USAGE = 2
+
+
+EXIT_NOT_LOCALISED = 3
+
+
+class UsageError(Exception):
+    pass
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse that reports bad input in one line and exits 2."""
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(f"{self.prog}: {message}")
+
+
+def version_text() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("bve_mj")
+    except PackageNotFoundError:  # pragma: no cover (run from a source tree, not installed)
+        return "unknown (not installed)"
+
+
+def int_arg(name: str, text: str | None, minimum: int) -> int | None:
+    from bve_mj.errors import ConfigError
+
+    if text is None:
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise ConfigError(name, text, f"an integer >= {minimum}") from None
+    if value < minimum:
+        raise ConfigError(name, text, f"an integer >= {minimum}")
+    return value
+
+
+def check_output_path(name: str, path: str | None) -> Path | None:
+    from bve_mj.errors import ConfigError
+
+    if path is None:
+        return None
+    p = Path(path)
+    if p.is_dir():
+        raise ConfigError(name, path, "a file path, not a directory")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise ConfigError(name, path, f"a path in an existing directory ({parent} does not exist)")
+    if not os.access(parent, os.W_OK):
+        raise ConfigError(name, path, f"a path in a writable directory ({parent} is not writable)")
+    return p
+
+
+def progress_printer(enabled: bool) -> Any:
+    start = time.perf_counter()
+
+    def report(done: int, total: int) -> None:
+        if not enabled:
+            return
+        width = 30
+        filled = int(width * done / total)
+        rate = done / max(time.perf_counter() - start, 1e-9)
+        eta = (total - done) / rate if rate > 0 else 0.0
+        sys.stderr.write(
+            f"\r  [{'#' * filled}{'.' * (width - filled)}] {done}/{total} runs, eta {eta:4.0f} s"
+        )
+        if done == total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+    return report
+
+
+def fmt(x: float | None, spec: str) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
+
+
+def given(**values: object) -> dict[str, object]:
+    """The options the user gave (not None): only these override the settings file."""
+    return {k: v for k, v in values.items() if v is not None}
+
+
+def float_arg(name: str, text: str | None, minimum: float, strict: bool = False) -> float | None:
+    from bve_mj.errors import ConfigError
+
+    if text is None:
+        return None
+    allowed = f"a number {'>' if strict else '>='} {minimum:g}"
+    try:
+        value = float(text)
+    except ValueError:
+        raise ConfigError(name, text, allowed) from None
+    if not math.isfinite(value) or value < minimum or (strict and value == minimum):
+        raise ConfigError(name, text, allowed)
+    return value
+
+
+def grid_text(errors: Sequence[float]) -> str:
+    if not errors:
+        return "default"
+    if len(errors) > 3:
+        return f"{errors[0]:g}..{errors[-1]:g} m ({len(errors)} values)"
+    return ",".join(f"{e:g}" for e in errors) + " m"

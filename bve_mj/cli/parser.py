@@ -1,0 +1,195 @@
+"""The ``bve-mj`` argument parser: every command, option and default."""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING
+
+from bve_mj.cli.args import Parser, version_text
+
+if TYPE_CHECKING:
+    pass
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = Parser(prog="bve-mj", description="Active monocular 3D fruit localisation: BVE + EKF.")
+    parser.add_argument("--version", action="version", version=f"bve-mj {version_text()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    paper = sub.add_parser(
+        "paper",
+        help="the paper's synthetic protocol, E1-E10, table like the paper's with its numbers beside ours",
+        description="Reproduce the paper's table in the synthetic world (Gaussian measurements).",
+    )
+    paper.add_argument(
+        "--experiments",
+        default="E1,E2,E3,E4,E5,E6,E7,E8,E9,E10",
+        help="comma-separated, e.g. E1,E6",
+    )
+    paper.add_argument("--runs", default="100", help="runs per experiment (default 100)")
+    paper.add_argument("--seed", default="0", help="base seed (default 0)")
+    paper.add_argument("--steps", default=None, help="planned views per run (default from settings: 30)")
+    paper.add_argument(
+        "--measurement", default=None, help="range (the paper's EKF) or camera (default from settings: range)"
+    )
+    paper.add_argument("--planner", default=None, help="bve, random or circle")
+    paper.add_argument("--filter", default=None, help="ekf or ukf (default from settings: ekf)")
+    paper.add_argument("--planning-model", default=None, help="paper or consistent")
+    paper.add_argument("--optimiser", default=None, help="slsqp or trust-constr")
+    paper.add_argument("--robot", default=None, help="arm for E5/E10: manipulator_h, ur5 or panda")
+    paper.add_argument("--joint-limits", default=None, help="urdf, or emanual (manipulator_h only)")
+    paper.add_argument("--formulation", default=None, help="kinematic feasibility: joint or cartesian")
+    paper.add_argument("--config", default=None, help="TOML file of settings (sections as in bve_mj.config)")
+    paper.add_argument("--workers", default=None, help="processes (default: all cores)")
+    paper.add_argument("--json", default=None, help="write settings and metrics to this JSON file")
+    paper.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+    ep = sub.add_parser(
+        "episode",
+        help="one closed-loop MuJoCo episode: detect, fuse, plan, IK, drive",
+        description="Run one seeded episode in the rendered greenhouse and report it.",
+    )
+    ep.add_argument("--config", default=None, help="scenario TOML (sections of bve_mj.config.Settings)")
+    ep.add_argument("--experiment", default=None, help="constraint set and loss, E1..E10 (default E5)")
+    ep.add_argument("--seed", default="0", help="scene, prior and sensor seed (default 0)")
+    ep.add_argument("--views", default=None, help="most planned views (default 15)")
+    ep.add_argument(
+        "--measurement", default=None, help="camera or range (default from settings: camera here)"
+    )
+    ep.add_argument("--planner", default=None, help="bve, random or circle")
+    ep.add_argument("--filter", default=None, help="ekf or ukf (default from settings: ekf)")
+    ep.add_argument(
+        "--state",
+        default=None,
+        help="centre (the paper's: range from the size with the prior's radius) or centre_radius "
+        "(the radius estimated too; default here)",
+    )
+    ep.add_argument("--planning-model", default=None, help="paper or consistent")
+    ep.add_argument("--robot", default=None, help="manipulator_h, ur5 or panda")
+    ep.add_argument("--approach", action="store_true", help="approach mode: end close to the fruit")
+    ep.add_argument("--realistic", action="store_true", help="sensor realism on (noise, calibration error)")
+    ep.add_argument("--video", default=None, help="write an mp4 of the approach path here")
+    ep.add_argument("--plots", default=None, help="write PREFIX_path.png and PREFIX_error.png")
+    ep.add_argument("--json", default=None, help="write the episode log (settings, views, outcome) here")
+    ep.add_argument("--quiet", action="store_true", help="print only the summary")
+    ep.add_argument(
+        "--initial-error",
+        default=None,
+        help="prior error half-width e [m]: along the ray (episode.prior = detection) or per axis "
+        "(cube); default 0.05",
+    )
+
+    for name, helptext, desc in (
+        (
+            "campaign",
+            "seeded Monte-Carlo runs: experiment x world x planner x measurement x initial error",
+            "Run (or resume) a campaign into a directory: runs.sqlite, runs.csv, summary.json, plots.",
+        ),
+        (
+            "recoverability",
+            "the paper's recoverability sweep: final error against initial error 0-0.5 m",
+            "A campaign over initial errors (default 0:0.5:0.01 m, 10 runs each, E1,E5,E6,E10).",
+        ),
+    ):
+        recover = name == "recoverability"
+        c = sub.add_parser(name, help=helptext, description=desc)
+        c.add_argument("--out", required=True, help="campaign directory (created; resumed if it holds one)")
+        c.add_argument(
+            "--experiments",
+            default="E1,E5,E6,E10" if recover else "E1,E2,E3,E4,E5,E6,E7,E8,E9,E10",
+            help="comma-separated, e.g. E1,E6",
+        )
+        c.add_argument("--worlds", default="synthetic", help="synthetic, mujoco or synthetic,mujoco")
+        c.add_argument("--planners", default="bve", help="any of bve,random,circle")
+        c.add_argument(
+            "--measurements",
+            default=None,
+            help="range,camera (default: each world's measurement.kind from the settings; auto = "
+            "range in the synthetic world, camera in MuJoCo)",
+        )
+        c.add_argument(
+            "--initial-errors",
+            default="0:0.5:0.01" if recover else None,
+            help="e0 [m]: X, X,Y,... or START:STOP:STEP (default: "
+            + ("0:0.5:0.01)" if recover else "protocol.initial_error_m, episode.initial_error_m)"),
+        )
+        c.add_argument("--runs", default="10" if recover else "100", help="runs per cell")
+        c.add_argument("--seed", default="0", help="base seed (default 0)")
+        c.add_argument("--steps", default=None, help="synthetic: planned views per run (default 30)")
+        c.add_argument("--views", default=None, help="mujoco: most planned views per run (default 15)")
+        c.add_argument(
+            "--approach", action="store_true", help="approach mode (eq. 13 term; default episode.approach)"
+        )
+        c.add_argument(
+            "--recovered-mm", default="30", help="a run 'recovered' below this final error (default 30)"
+        )
+        c.add_argument("--config", default=None, help="TOML file of settings (sections as in bve_mj.config)")
+        c.add_argument("--workers", default=None, help="local processes (default: all cores)")
+        c.add_argument(
+            "--strict",
+            action="store_true",
+            help="refuse to resume a campaign its store says other code started (default: a note)",
+        )
+        c.add_argument("--scheduler", default=None, help="Dask distributed scheduler address instead")
+        c.add_argument(
+            "--no-plots", action="store_true", help="skip the PNG figures (skipped anyway without matplotlib)"
+        )
+        c.add_argument("--quiet", action="store_true", help="no progress on stderr, no per-cell table")
+    sc = sub.add_parser(
+        "scenarios",
+        help="the greenhouse scenario suite over seeds: the table users judge the project by",
+        description="Run every named scenario (examples/scenarios/suite/*.toml) over seeded episodes.",
+    )
+    sc.add_argument("--only", default=None, help="comma-separated scenario names (default: all)")
+    sc.add_argument("--seeds", default="20", help="episodes per scenario (default 20)")
+    sc.add_argument("--seed", default="0", help="base seed (default 0)")
+    sc.add_argument(
+        "--measurement", default=None, help="camera or range for every scenario (default: each file's)"
+    )
+    sc.add_argument("--filter", default=None, help="ekf or ukf for every scenario (default: each file's)")
+    sc.add_argument(
+        "--state", default=None, help="centre or centre_radius for every scenario (default: each file's)"
+    )
+    sc.add_argument("--dir", default=None, help="a folder of scenario TOML files instead of the suite")
+    sc.add_argument("--workers", default=None, help="local processes (default: all cores)")
+    sc.add_argument("--json", default=None, help="write per-scenario metrics and episode rows here")
+    sc.add_argument(
+        "--plot",
+        default=None,
+        help="write the consistency plot (share inside the p-ellipsoid against p) here",
+    )
+    sc.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    cal = sub.add_parser(
+        "calibrate",
+        help="render the detector against ground truth and fit its noise model (the filter's R)",
+        description="Views of the suite's scenes from poses the arm reaches, detected and compared with "
+        "the truth; the fitted noise model is written as JSON (set measurement.noise_model to it).",
+    )
+    cal.add_argument(
+        "--out", default="noise_model.json", help="the noise model file (default noise_model.json)"
+    )
+    cal.add_argument("--only", default=None, help="comma-separated scenario names (default: all)")
+    cal.add_argument("--dir", default=None, help="a folder of scenario TOML files instead of the suite")
+    cal.add_argument("--scenes", default="8", help="seeded scenes per scenario (default 8)")
+    cal.add_argument("--views", default="25", help="views per scene (default 25)")
+    cal.add_argument("--seed", default="1", help="base seed (default 1: not the suite's 0)")
+    cal.add_argument("--workers", default=None, help="local processes (default: all cores)")
+    cal.add_argument("--json", default=None, help="write every view's detection and error here")
+    cal.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    res = sub.add_parser(
+        "results",
+        help="run (or resume) the results campaigns and write docs/results.md with its figures",
+        description="The paper's table beside ours, recoverability curves, baselines, sample paths.",
+    )
+    res.add_argument("--out", default="docs/results.md", help="the page (figures go to results/ beside it)")
+    res.add_argument("--work", default="results_work", help="campaign directories (resumable)")
+    res.add_argument("--runs", default="100", help="synthetic runs per cell (default 100)")
+    res.add_argument("--mujoco-runs", default="20", help="MuJoCo episodes per cell (default 20)")
+    res.add_argument("--recover-runs", default="10", help="runs per initial error (default 10)")
+    res.add_argument("--recover-grid", default="0:0.5:0.01", help="initial errors [m] (default 0:0.5:0.01)")
+    res.add_argument("--experiments", default="E1,E2,E3,E4,E5,E6,E7,E8,E9,E10", help="comma-separated")
+    res.add_argument("--scenario-seeds", default="20", help="episodes per scenario of the suite (default 20)")
+    res.add_argument("--seed", default="0", help="base seed (default 0)")
+    res.add_argument("--workers", default=None, help="local processes (default: all cores)")
+    res.add_argument("--scheduler", default=None, help="Dask distributed scheduler address instead")
+    res.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    return parser

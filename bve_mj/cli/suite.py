@@ -1,0 +1,126 @@
+"""``bve-mj scenarios`` and ``bve-mj calibrate``: the greenhouse scenario suite and the
+detector's noise calibration."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import TYPE_CHECKING
+
+from bve_mj.cli.args import EXIT_FAILURE, EXIT_OK, check_output_path, int_arg, progress_printer
+from bve_mj.reporting.atomic import write_json_atomic
+
+if TYPE_CHECKING:
+    pass
+
+
+def cmd_scenarios(args: argparse.Namespace) -> int:
+    from bve_mj.campaigns.metrics import consistency_curve
+    from bve_mj.campaigns.scenarios import format_suite, load_suite, run_suite, suite_json
+    from bve_mj.errors import ConfigError
+
+    seeds = int_arg("seeds", args.seeds, 1) or 1
+    seed = int_arg("seed", args.seed, 0) or 0
+    workers = int_arg("workers", args.workers, 1)
+    json_path = check_output_path("json", args.json)
+    plot_path = check_output_path("plot", args.plot)
+    if plot_path is not None:
+        if plot_path.suffix.lower() != ".png":
+            raise ConfigError("plot", args.plot, "a path ending in .png")
+        from bve_mj.reporting.plots import require_matplotlib
+
+        require_matplotlib("plot", args.plot)
+    if args.measurement is not None and args.measurement not in ("camera", "range"):
+        raise ConfigError("measurement", args.measurement, "camera or range")
+    suite = load_suite(args.dir, args.only.split(",") if args.only is not None else None)
+    print(
+        f"bve-mj scenarios: {len(suite)} scenarios x {seeds} seeds (base seed {seed}), measurement "
+        f"{args.measurement or 'from each file'}, filter {args.filter or 'from each file'}, state "
+        f"{args.state or 'from each file'}"
+    )
+    show = not args.quiet and sys.stderr.isatty()
+    result = run_suite(
+        suite, seeds=seeds, seed=seed, measurement=args.measurement, filter_kind=args.filter,
+        state=args.state, workers=workers, progress=progress_printer(show),
+    )  # fmt: skip
+    summaries = {sc.name: result.summary(sc.name) for sc in result.scenarios}
+    for line in format_suite(summaries):
+        print(line)
+    print(f"wall time {result.wall_s:.1f} s")
+    if plot_path is not None:
+        from bve_mj.reporting.plots import plot_consistency
+
+        curves = {name: s["consistency"] for name, s in summaries.items()}
+        curves["all"] = consistency_curve(
+            [r["nees"] for rows in result.rows.values() for r in rows if "nees" in r]
+        )
+        any_settings = next(iter(result.settings.values()))
+        title = (
+            f"bve-mj scenarios, {result.seeds} seeds: {any_settings.measurement.kind} measurement, "
+            f"{any_settings.filter.kind.upper()}, state {any_settings.filter.state}"
+        )
+        print(f"wrote {plot_consistency(curves, plot_path, title)}")
+    if json_path is not None:
+        write_json_atomic(json_path, suite_json(result))
+        print(f"wrote {json_path}")
+    if result.crashed:
+        print(f"bve-mj: {len(result.crashed)} episodes crashed:", file=sys.stderr)
+        for line in result.crashed[:5]:
+            print(f"  {line}", file=sys.stderr)
+        return EXIT_FAILURE
+    return EXIT_OK
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from bve_mj.campaigns.calibration import calibrate
+    from bve_mj.campaigns.scenarios import load_suite
+    from bve_mj.errors import ConfigError
+
+    scenes = int_arg("scenes", args.scenes, 1) or 1
+    views = int_arg("views", args.views, 1) or 1
+    seed = int_arg("seed", args.seed, 0) or 0
+    workers = int_arg("workers", args.workers, 1)
+    out = check_output_path("out", args.out)
+    assert out is not None
+    if out.suffix.lower() != ".json":
+        raise ConfigError("out", args.out, "a path ending in .json")
+    json_path = check_output_path("json", args.json)
+    suite = load_suite(args.dir, args.only.split(",") if args.only is not None else None)
+    print(f"bve-mj calibrate: {len(suite)} scenarios x {scenes} scenes x {views} views (base seed {seed})")
+    show = not args.quiet and sys.stderr.isatty()
+    model, report, data = calibrate(
+        suite, scenes=scenes, views=views, seed=seed, workers=workers, progress=progress_printer(show)
+    )
+    print(
+        f"{report['views']} views rendered, {report['refused']} refused, {report['detections']} fitted, "
+        f"{report['gross_errors']} gross errors (> 6σ: the wrong fruit; left to the filter's gate)"
+    )
+    for name, coef in (("centre", model.centre_var_px2), ("radius", model.radius_var_px2)):
+        r = report[name]
+        terms = " + ".join(
+            f"{c:.4g}·{f}" for c, f in zip(coef, ("1", "fit²", "partial²", "elongation²"), strict=True)
+        )
+        print(
+            f"{name:6} variance [px²] = {terms}; error rms {r['error_rms_px']:.3f} px, normalised rms "
+            f"{r['z_rms']:.2f}, beyond 2σ {r['beyond_2sigma_pct']:.1f}% (Gaussian 4.6), beyond 3σ "
+            f"{r['beyond_3sigma_pct']:.2f}% (0.27)"
+        )
+    b0, b1 = model.radius_bias_px
+    print(f"apparent radius bias {b0:+.3f} {b1:+.3f}·r_px/100 px (removed from every measurement)")
+    h, v = model.centre_bias_rel
+    print(
+        f"the fruit's own centre offset: σ {100 * h:.2f}% of its radius horizontally, {100 * v:.2f}% "
+        "vertically (added to the centre's covariance)"
+    )
+    cc, rc = model.centre_correlation, model.radius_correlation
+    print(
+        f"views from nearby directions share their errors: correlation {cc.weight:.2f} (centre), "
+        f"{rc.weight:.2f} (radius) at 0°, half of it at {cc.half_angle_deg():.0f}° and "
+        f"{rc.half_angle_deg():.0f}° (a repeated view counts as the share it adds)"
+    )
+    write_json_atomic(out, model.to_json())
+    print(f'wrote {out} (wall {data.wall_s:.0f} s); use it with [measurement] noise_model = "{out}"')
+    if json_path is not None:
+        write_json_atomic(json_path, {"model": model.to_json(), "report": report, "rows": list(data.rows)})
+        print(f"wrote {json_path}")
+    return EXIT_OK
