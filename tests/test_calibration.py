@@ -14,6 +14,7 @@ from bve_mj.estimation import Belief
 from bve_mj.estimation.noise import fit_noise_model, load_noise_model, measure
 from bve_mj.geometry import camera_rotation
 from bve_mj.loop.episode import Claims, StopRules, ViewRecord
+from bve_mj.loop.events import Event
 
 
 def _synthetic_rows(rng, fruits=40, views=12):
@@ -189,6 +190,11 @@ def test_converged_waits_for_enough_agreeing_views():
     assert rules.outcome([_view(0, tight), _view(1, tight)]) is None
     assert rules.outcome([_view(0, tight), _view(1, tight), _view(2, tight)]) == "converged"
     # a reset starts the count again
-    views = [_view(0, tight), _view(1, tight), _view(2, tight, events=("belief_reset",)), _view(3, tight)]
+    views = [
+        _view(0, tight),
+        _view(1, tight),
+        _view(2, tight, events=(Event("belief_reset"),)),
+        _view(3, tight),
+    ]
     assert rules.outcome(views) is None
     assert StopRules(sigma_m=0.0015).outcome([_view(0, tight)]) == "converged"

@@ -3,10 +3,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bve_mj.campaigns.metrics import consistency_metrics, euclidean_metrics, paper_metrics
 from bve_mj.campaigns.paper import run_synthetic, run_table
 from bve_mj.config import Settings, with_overrides
 from bve_mj.config.experiments import EXPERIMENTS
+from bve_mj.estimation.metrics import consistency_metrics, euclidean_metrics, paper_metrics
 
 
 def test_metrics_on_a_hand_made_example():

@@ -43,3 +43,58 @@ def test_one_blas_thread_reaches_blas_loaded_after_a_light_import():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     n_libs, threads = map(int, out.stdout.split())
     assert n_libs >= 1 and threads == 1
+
+
+LAYERS = [
+    {"errors", "threads"},
+    {"config"},
+    {"geometry"},
+    {"estimation"},
+    {"planning", "perception"},
+    {"robot"},
+    {"sim"},
+    {"loop"},
+    {"campaigns"},
+    {"reporting"},
+    {"cli"},
+]
+"""The package's layers from the bottom: a module imports only from its own layer or below
+(the package root, which re-exports, and its ``__version__`` are above them all)."""
+
+
+def _imports_by_part() -> dict[str, set[str]]:
+    import ast
+    from pathlib import Path
+
+    root = Path(bve_mj.__file__).parent
+    out: dict[str, set[str]] = {}
+    for path in root.rglob("*.py"):
+        rel = path.relative_to(root)
+        if rel == Path("__init__.py"):
+            continue
+        part = rel.parts[0].removesuffix(".py")
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = (
+                [node.module]
+                if isinstance(node, ast.ImportFrom) and node.module
+                else [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else []
+            )
+            for name in names:
+                if name.startswith("bve_mj."):
+                    out.setdefault(part, set()).add(name.split(".")[1])
+    return out
+
+
+def test_no_module_imports_from_a_layer_above_its_own():
+    rank = {part: i for i, layer in enumerate(LAYERS) for part in layer}
+    imports = _imports_by_part()
+    assert set(imports) <= set(rank), f"a part outside the layers: {set(imports) - set(rank)}"
+    upward = sorted(
+        f"{part} -> {used}"
+        for part, used_parts in imports.items()
+        for used in used_parts
+        if rank[used] > rank[part]
+    )
+    assert not upward, upward

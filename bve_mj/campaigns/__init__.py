@@ -5,7 +5,7 @@
   :mod:`.runner`: :func:`run_campaign`.
 - :mod:`.paper`: the paper's table (E1-E10 in the synthetic world).
 - :mod:`.scenarios`: the greenhouse scenario suite; :mod:`.calibration`: the detector's noise
-  calibration; :mod:`.metrics`: errors, consistency, the Cramér-Rao bound.
+  calibration.
 """
 
 from __future__ import annotations

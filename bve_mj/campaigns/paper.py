@@ -11,10 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bve_mj.campaigns.metrics import consistency_metrics, euclidean_metrics, paper_metrics
 from bve_mj.config import Settings, settings_to_dict
 from bve_mj.config.experiments import PAPER_RESULTS, Experiment
 from bve_mj.errors import ConfigError
+from bve_mj.estimation.metrics import consistency_metrics, euclidean_metrics, paper_metrics
 from bve_mj.loop.synthetic import for_robot, synthetic_episode
 
 

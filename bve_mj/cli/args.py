@@ -97,10 +97,6 @@ def progress_printer(enabled: bool) -> Any:
     return report
 
 
-def fmt(x: float | None, spec: str) -> str:
-    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
-
-
 def given(**values: object) -> dict[str, object]:
     """The options the user gave (not None): only these override the settings file."""
     return {k: v for k, v in values.items() if v is not None}

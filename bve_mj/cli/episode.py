@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from bve_mj.cli.args import EXIT_NOT_LOCALISED, EXIT_OK, check_output_path, float_arg, given, int_arg
-from bve_mj.loop.outcomes import NOT_LOCALISED, OUTCOME_NOTES
+from bve_mj.loop.outcomes import Outcome
 from bve_mj.reporting.atomic import write_json_atomic
 
 if TYPE_CHECKING:
@@ -110,8 +110,9 @@ def cmd_episode(args: argparse.Namespace) -> int:
     counts = result.result.event_counts()
     if counts:
         print("events: " + ", ".join(f"{k} x{n}" for k, n in sorted(counts.items())))
-    if doc["outcome"] in OUTCOME_NOTES:
-        print(OUTCOME_NOTES[doc["outcome"]])
+    outcome = Outcome(doc["outcome"])
+    if outcome.note is not None:
+        print(outcome.note)
     if video_path is not None:
         print(f"wrote {video_path} ({frames} frames)")
     if plots_prefix is not None:
@@ -122,7 +123,7 @@ def cmd_episode(args: argparse.Namespace) -> int:
     if json_path is not None:
         write_json_atomic(json_path, doc)
         print(f"wrote {json_path}")
-    return EXIT_NOT_LOCALISED if doc["outcome"] in NOT_LOCALISED else EXIT_OK
+    return EXIT_OK if outcome.localised else EXIT_NOT_LOCALISED
 
 
 def _stage_times(views: Sequence[dict[str, Any]]) -> str:

@@ -15,9 +15,9 @@ if TYPE_CHECKING:
 
 
 def cmd_scenarios(args: argparse.Namespace) -> int:
-    from bve_mj.campaigns.metrics import consistency_curve
     from bve_mj.campaigns.scenarios import format_suite, load_suite, run_suite, suite_json
     from bve_mj.errors import ConfigError
+    from bve_mj.estimation.metrics import consistency_curve
 
     seeds = int_arg("seeds", args.seeds, 1) or 1
     seed = int_arg("seed", args.seed, 0) or 0

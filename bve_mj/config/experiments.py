@@ -5,9 +5,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from bve_mj.config import LossName
+from bve_mj.config.fields import ConstraintName, LossName
 from bve_mj.errors import ConfigError
-from bve_mj.planning.constraints import ConstraintName
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -14,6 +15,8 @@ from bve_mj.config import FilterConfig
 from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation import Belief, UpdateResult, filter_update, predict
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
+from bve_mj.loop.events import Event, EventKind
+from bve_mj.loop.outcomes import Outcome
 from bve_mj.planning.plan import (
     LearnsFromFailedViews,
     LearnsFromFusedViews,
@@ -32,8 +35,9 @@ class ViewRecord:
     """One view: where the camera was, what the planner said, what the filter made of it.
 
     ``iteration`` 0 is the view from the start pose (no plan: status None). ``events``: what
-    went wrong and how it was handled (``planner_failed: ...``, ``ik_failed``, and injected
-    faults: ``dropped``, ``false_detection``, ``outlier``, ``ik_failure``).
+    went wrong and how it was handled (:class:`~bve_mj.loop.events.Event`: ``planner_failed``
+    with its reason, ``ik_failed``, ``belief_reset``, ``ambiguous``, and injected faults:
+    ``dropped``, ``false_detection``, ``outlier``, ``ik_failure``).
     """
 
     iteration: int
@@ -46,7 +50,11 @@ class ViewRecord:
     nis: float
     belief: Belief
     world: dict[str, object] | None = None
-    events: tuple[str, ...] = ()
+    events: tuple[Event, ...] = ()
+
+    def has(self, kind: EventKind) -> bool:
+        """Whether an event of this kind happened at this view."""
+        return any(e.kind == kind for e in self.events)
 
 
 @dataclass(frozen=True)
@@ -74,7 +82,7 @@ class StopRules:
     approach_distance_m: float | None = None
     stall_m: float | None = None
 
-    def outcome(self, views: list[ViewRecord]) -> str | None:
+    def outcome(self, views: list[ViewRecord]) -> Outcome | None:
         b = views[-1].belief
         n = self.stable_views
         stalled = (
@@ -89,22 +97,22 @@ class StopRules:
         )
         if self.approach_distance_m is not None:
             if np.linalg.norm(views[-1].p_world_camera - b.centre_m) <= self.approach_distance_m:
-                return "approached"
-            return "approach_blocked" if stalled else None
+                return Outcome.APPROACHED
+            return Outcome.APPROACH_BLOCKED if stalled else None
         if (
             self.sigma_m is not None
             and b.sigma_max_m <= self.sigma_m
             and _accepted_since_reset(views) >= self.min_accepted
         ):
-            return "converged"
+            return Outcome.CONVERGED
         if self.stable_m is not None and len(views) > n and all(v.accepted for v in views[-n:]):
             moves = [
                 np.linalg.norm(views[-i].belief.centre_m - views[-i - 1].belief.centre_m)
                 for i in range(1, n + 1)
             ]
             if max(moves) <= self.stable_m:
-                return "stable"
-        return "stalled" if stalled else None
+                return Outcome.STABLE
+        return Outcome.STALLED if stalled else None
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -114,14 +122,14 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 def _accepted_since_reset(views: Sequence[ViewRecord]) -> int:
     """Accepted measurements since the last belief reset (the reset's own view counts)."""
-    start = max((k for k, v in enumerate(views) if "belief_reset" in v.events), default=0)
+    start = max((k for k, v in enumerate(views) if v.has("belief_reset")), default=0)
     return sum(v.accepted for v in views[start:])
 
 
 def _planned_move(view: ViewRecord) -> bool:
     """The planner chose this view and the arm went there: no planner fallback, no IK failure
     (a camera held by a failure has not run out of better views)."""
-    return view.plan_status != "fallback" and not any(e.startswith("ik_") for e in view.events)
+    return view.plan_status != "fallback" and not (view.has("ik_failed") or view.has("ik_failure"))
 
 
 @dataclass(frozen=True)
@@ -131,20 +139,15 @@ class EpisodeResult:
     prior: Belief
     views: tuple[ViewRecord, ...]
     wall_s: float
-    outcome: str = "max_views"
+    outcome: Outcome = Outcome.MAX_VIEWS
 
     @property
     def final(self) -> Belief:
         return self.views[-1].belief if self.views else self.prior
 
     def event_counts(self) -> dict[str, int]:
-        """How often each kind of event (the text before any ``:``) happened, over all views."""
-        counts: dict[str, int] = {}
-        for v in self.views:
-            for event in v.events:
-                kind = event.split(":")[0]
-                counts[kind] = counts.get(kind, 0) + 1
-        return counts
+        """How often each kind of event happened, over all views."""
+        return dict(Counter(e.kind for v in self.views for e in v.events))
 
 
 def run_episode(
@@ -193,7 +196,7 @@ def run_episode(
     innovations: list[tuple[float, int]] = []  # (NIS, dimension) of the accepted, since a reset
     fused: list[np.ndarray] = []  # unit directions estimate → camera of the accepted, since a reset
 
-    def fuse(i: int, status: PlanStatus | None, feasible: bool, plan_s: float, events: list[str]) -> None:
+    def fuse(i: int, status: PlanStatus | None, feasible: bool, plan_s: float, events: list[Event]) -> None:
         nonlocal belief
         looked_at = belief.centre_m
         obs = world.observe(belief)
@@ -217,7 +220,7 @@ def run_episode(
                     del contested[: -2 * n]
                     reset = _reopen(prior, rejected, n, gate, update)
                     if reset is not None:  # the belief had locked onto something wrong
-                        events.append("belief_reset")
+                        events.append(Event("belief_reset"))
                         result = dataclasses.replace(result, belief=reset, accepted=True)
                         rejected.clear()
                         contested.clear()
@@ -226,13 +229,14 @@ def run_episode(
             belief, accepted, nis = result.belief, result.accepted, result.nis
         info = world.view_info() if isinstance(world, ReportsViews) else None
         if info is not None:
-            events += [str(e) for e in (*info.get("events", []), *info.get("faults", []))]
-            if info.get("ik_failed") and "ik_failure" not in events:
-                events.append("ik_failed")
+            events += [Event(str(e)) for e in (*info.get("events", []), *info.get("faults", []))]  # type: ignore[arg-type]
+            if info.get("ik_failed") and not any(e.kind == "ik_failure" for e in events):
+                events.append(Event("ik_failed"))
         if accepted:
             innovations.append((nis, np.size(obs.z) if obs is not None else 0))
             fused.append(direction)
-        if "belief_reset" in events:
+        restarted = any(e.kind == "belief_reset" for e in events)
+        if restarted:
             innovations[:] = innovations[-1:]
             fused[:] = fused[-1:]
         claimed = belief if claims is None else claims.claim(belief, innovations)
@@ -245,7 +249,7 @@ def run_episode(
         if not accepted and isinstance(planner, LearnsFromFailedViews):
             planner.note_failed_view(world.p_world_camera, looked_at)
         if accepted and correlation is not None and isinstance(planner, LearnsFromFusedViews):
-            planner.note_fused_view(world.p_world_camera, looked_at, restart="belief_reset" in events)
+            planner.note_fused_view(world.p_world_camera, looked_at, restart=restarted)
         q = world.q_measured if isinstance(world, ReadsEncoders) else None
         if q is not None and isinstance(planner, SyncsToEncoders):
             planner.set_configuration(q)
@@ -253,7 +257,7 @@ def run_episode(
             on_view(views[-1])
 
     fuse(0, None, True, 0.0, [])
-    outcome = None
+    outcome: Outcome | None = None
     for i in range(1, steps + 1):
         plan, events = _plan_or_hold(planner, belief, world.p_world_camera, i)
         world.move_camera(plan)
@@ -263,15 +267,15 @@ def run_episode(
         if outcome is not None:
             break
     if not any(v.measured for v in views):  # whatever stopped it: nothing was ever measured
-        ambiguous = any("ambiguous" in v.events for v in views)
-        outcome = "ambiguous" if ambiguous else "never_detected"
+        ambiguous = any(v.has("ambiguous") for v in views)
+        outcome = Outcome.AMBIGUOUS if ambiguous else Outcome.NEVER_DETECTED
     elif outcome is None:
-        outcome = "max_views"
-    if outcome not in ("never_detected", "ambiguous") and (
+        outcome = Outcome.MAX_VIEWS
+    if outcome not in (Outcome.NEVER_DETECTED, Outcome.AMBIGUOUS) and (
         not supported(views, filter_config.reset_after_rejections)
         or _contested(prior, belief, contested, gate, update)
     ):
-        outcome = "unreliable"
+        outcome = Outcome.UNRELIABLE
     return EpisodeResult(prior, tuple(views), time.perf_counter() - t0, outcome)
 
 
@@ -345,7 +349,7 @@ def _contested(
 
 def _plan_or_hold(
     planner: Planner, belief: Belief, p_world_camera: np.ndarray, iteration: int
-) -> tuple[ViewPlan, list[str]]:
+) -> tuple[ViewPlan, list[Event]]:
     """The planner's plan, or (when it fails) a fallback that holds the camera in place."""
     t0 = time.perf_counter()
     try:
@@ -359,7 +363,7 @@ def _plan_or_hold(
         np.asarray(p_world_camera, dtype=float).copy(), belief.centre_m.copy(), "fallback", False,
         float("nan"), plan_s=time.perf_counter() - t0,
     )  # fmt: skip
-    return hold, [f"planner_failed: {reason}"]
+    return hold, [Event("planner_failed", reason)]
 
 
 def _reopen(

@@ -22,6 +22,7 @@ from bve_mj.estimation.noise import load_noise_model
 from bve_mj.geometry import ray_frame
 from bve_mj.loop.episode import Claims, EpisodeResult, StopRules, ViewRecord, run_episode
 from bve_mj.loop.faults import FaultyPlanner, FaultyWorld
+from bve_mj.loop.outcomes import Outcome
 from bve_mj.planning.constraints import ConstraintName
 from bve_mj.planning.plan import Planner
 from bve_mj.robot import ArmKinematics, IkOptions, arm_kinematics, look_at_ik, make_arm_planner
@@ -99,10 +100,10 @@ class MujocoEpisode:
 
     def cramer_rao_mm(self) -> float:
         """√tr of the centre block of the Cramér-Rao bound of the views this episode fused
-        (:func:`bve_mj.campaigns.metrics.cramer_rao_bound`: the prior, and each accepted view's model
+        (:func:`bve_mj.estimation.metrics.cramer_rao_bound`: the prior, and each accepted view's model
         with the noise it was fused with, at the true state; calibration biases at 0) [mm];
         NaN when nothing was fused."""
-        from bve_mj.campaigns.metrics import cramer_rao_bound
+        from bve_mj.estimation.metrics import cramer_rao_bound
         from bve_mj.estimation.models import (
             BearingSizeModel,
             CameraModel,
@@ -149,7 +150,7 @@ class MujocoEpisode:
                     "measured": v.measured,
                     "accepted": v.accepted,
                     "nis": None if math.isnan(v.nis) else v.nis,
-                    "events": list(v.events),
+                    "events": [str(e) for e in v.events],
                     "estimate_m": v.belief.centre_m.tolist(),
                     "covariance_m2": v.belief.cov[:3, :3].tolist(),
                     "error_mm": 1e3 * float(np.linalg.norm(v.belief.centre_m - self.truth)),
@@ -317,7 +318,9 @@ def run_mujoco_episode(
     try:
         q_start = _start_configuration(kin, coarse, ep.band_distance_m, prior_rng)
     except PlanningError:  # the fruit is out of the arm's reach: a clear outcome, not a crash
-        return MujocoEpisode(EpisodeResult(cube, (), 0.0, "unreachable"), info, s, seed, kin.home.copy())
+        return MujocoEpisode(
+            EpisodeResult(cube, (), 0.0, Outcome.UNREACHABLE), info, s, seed, kin.home.copy()
+        )
     if ep.prior == "cube":
         prior = cube
     else:

@@ -1,32 +1,70 @@
-"""How an episode ends: the outcomes, which of them did not localise the fruit, what each means."""
+"""How an episode ends: its outcome, whether it localised the fruit, and what each means."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from enum import StrEnum
 
-if TYPE_CHECKING:
-    pass
-
-
-NOT_LOCALISED = ("unreachable", "never_detected", "ambiguous", "unreliable", "approach_blocked")
-
-"""Episode outcomes that exit 3: the fruit was out of the arm's reach, never seen (or never told
-apart from its neighbours), its estimate is not supported by the measurements, or (approach
-mode) the arm could not bring the camera close."""
+__all__ = ["Outcome"]
 
 
-OUTCOME_NOTES = {
-    "unreachable": "the arm cannot reach a pose that looks at the fruit's estimate: nothing was measured",
-    "never_detected": "no view detected the fruit: the estimate is the prior",
-    "ambiguous": "more than one fruit in view fits the estimate about equally well, and no view told "
-    "which one is the target: nothing was measured, the estimate is the prior",
-    "approach_blocked": "the arm found no reachable pose closer to the fruit (the camera stopped "
+class Outcome(StrEnum):
+    """How an episode ended. A ``str``: it compares equal to, and serialises as, its value
+    (``Outcome.CONVERGED == "converged"``), so logs and JSON read as before."""
+
+    CONVERGED = "converged"
+    """The largest posterior standard deviation fell below the stop threshold."""
+    STABLE = "stable"
+    """The estimate stopped moving over accepted views."""
+    APPROACHED = "approached"
+    """Approach mode: the camera came close to the estimate."""
+    MAX_VIEWS = "max_views"
+    """The view budget ran out first."""
+    STALLED = "stalled"
+    """The camera stopped moving: the planner found no better view it can reach."""
+    APPROACH_BLOCKED = "approach_blocked"
+    """Approach mode: the arm could not bring the camera closer."""
+    UNRELIABLE = "unreliable"
+    """The final estimate is not supported by the measurements."""
+    NEVER_DETECTED = "never_detected"
+    """No view detected the fruit."""
+    AMBIGUOUS = "ambiguous"
+    """No view told the target apart from a neighbour."""
+    UNREACHABLE = "unreachable"
+    """The arm cannot reach a pose that looks at the fruit."""
+
+    @property
+    def success(self) -> bool:
+        """A stop rule says the estimate is done (a claim the scenario suite holds it to)."""
+        return self in (Outcome.CONVERGED, Outcome.STABLE, Outcome.APPROACHED)
+
+    @property
+    def localised(self) -> bool:
+        """False when the fruit was out of reach, never seen (or never told apart from its
+        neighbours), its estimate is not supported by the measurements, or (approach mode) the
+        camera could not come close: ``bve-mj episode`` then exits 3."""
+        return self not in (
+            Outcome.UNREACHABLE, Outcome.NEVER_DETECTED, Outcome.AMBIGUOUS, Outcome.UNRELIABLE,
+            Outcome.APPROACH_BLOCKED,
+        )  # fmt: skip
+
+    @property
+    def note(self) -> str | None:
+        """What the outcome means for the user, printed under an episode's summary (None for
+        the plain ones)."""
+        return _NOTES.get(self)
+
+
+_NOTES = {
+    Outcome.UNREACHABLE: "the arm cannot reach a pose that looks at the fruit's estimate: nothing was "
+    "measured",
+    Outcome.NEVER_DETECTED: "no view detected the fruit: the estimate is the prior",
+    Outcome.AMBIGUOUS: "more than one fruit in view fits the estimate about equally well, and no view "
+    "told which one is the target: nothing was measured, the estimate is the prior",
+    Outcome.APPROACH_BLOCKED: "the arm found no reachable pose closer to the fruit (the camera stopped "
     "moving): the fruit is localised but not approached",
-    "unreliable": "the final estimate is not supported by the measurements (fewer than two "
+    Outcome.UNRELIABLE: "the final estimate is not supported by the measurements (fewer than two "
     "accepted since the last reset, or most recent ones gated out as disagreeing with it): do not "
     "trust it",
-    "stalled": "the camera stopped moving (no better reachable view): more views would only repeat "
-    "the same measurement",
+    Outcome.STALLED: "the camera stopped moving (no better reachable view): more views would only "
+    "repeat the same measurement",
 }
-
-"""What an outcome means, printed under the episode's summary."""

@@ -258,7 +258,7 @@ def plot_episode(doc: dict[str, object], prefix: str | Path) -> tuple[Path, Path
 
 def plot_consistency(curves: dict[str, list[tuple[float, float]]], path: str | Path, title: str = "") -> Path:
     """The consistency plot: for each named curve (a scenario, a filter, ...; from
-    :func:`bve_mj.campaigns.metrics.consistency_curve`), the share of episodes whose truth lies inside
+    :func:`bve_mj.estimation.metrics.consistency_curve`), the share of episodes whose truth lies inside
     the final p-ellipsoid against p. An honest filter lies on the diagonal; below it, the
     covariance claims too much. Written as PNG to ``path``."""
     plt = _pyplot()

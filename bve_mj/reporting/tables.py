@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any
-
-from bve_mj.cli.args import fmt
 
 if TYPE_CHECKING:
     pass
@@ -39,3 +38,8 @@ def format_table(summaries: dict[str, Any], paper: dict[str, dict[str, float]]) 
         "no-reach: runs that never found one (E5/E10: reachable by the arm)"
     )
     return lines
+
+
+def fmt(x: float | None, spec: str) -> str:
+    """``x`` formatted with ``spec``, "-" when missing (None or NaN)."""
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)

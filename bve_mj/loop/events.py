@@ -1,0 +1,35 @@
+"""What happened at a view beside the measurement: failures, how they were handled, injected
+faults. Typed: a kind from a fixed list and an optional detail (the reason)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal, get_args
+
+__all__ = ["Event", "EventKind"]
+
+EventKind = Literal[
+    "planner_failed",  # the planner raised or returned a non-finite view: the camera held
+    "ik_failed",  # the arm's IK found no joint angles for the planned view: the arm held
+    "belief_reset",  # gated-out measurements that agree with each other replaced the belief
+    "ambiguous",  # the detector saw more than one fruit fitting the estimate and measured none
+    "dropped",  # injected: the view's detection was lost
+    "false_detection",  # injected: the view measured another red object
+    "outlier",  # injected: the measurement got a gross error
+    "ik_failure",  # injected: the move's IK failed
+]
+
+
+@dataclass(frozen=True)
+class Event:
+    """One event of a view: its kind and, where there is one, the reason."""
+
+    kind: EventKind
+    detail: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in get_args(EventKind):
+            raise ValueError(f"event kind {self.kind!r}: not one of {', '.join(get_args(EventKind))}")
+
+    def __str__(self) -> str:
+        return f"{self.kind}: {self.detail}" if self.detail else self.kind
