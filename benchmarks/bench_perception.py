@@ -33,7 +33,8 @@ from bve_mj.perception import Detection, Intrinsics, detect
 from bve_mj.robot import ArmKinematics, get_robot
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.render import OffscreenRenderer, gl_backend
-from bve_mj.sim.scene import PROBE_CAMERA, Fruit, build_scene, set_probe_pose
+from bve_mj.sim.scene import build_scene, set_probe_pose
+from bve_mj.sim.scene_model import PROBE_CAMERA, Fruit
 
 
 def _leaf_table(kin: ArmKinematics, s: Settings, intr: Intrinsics, target: Fruit, views: int) -> None:

@@ -18,7 +18,7 @@ import numpy as np
 
 from bve_mj.config import Settings
 from bve_mj.perception import Detection, Intrinsics, detect
-from bve_mj.reporting.video import draw_detection
+from bve_mj.reporting.overlay import draw_detection
 from bve_mj.robot import ArmKinematics, get_robot, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.render import OffscreenRenderer

@@ -12,7 +12,7 @@ from bve_mj.config import Settings, with_overrides
 from bve_mj.loop.mujoco import run_mujoco_episode
 from bve_mj.reporting.video import EpisodeRecorder
 from bve_mj.robot import arm_kinematics
-from bve_mj.sim.scene import Fruit
+from bve_mj.sim.scene_model import Fruit
 
 CAMERA = with_overrides(Settings(), measurement={"kind": "camera"})
 

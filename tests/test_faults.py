@@ -232,7 +232,7 @@ def test_a_second_red_blob_in_the_rendered_scene_does_not_capture_the_estimate(k
     import mujoco
 
     from bve_mj.loop.mujoco import run_mujoco_episode
-    from bve_mj.sim.scene import Fruit
+    from bve_mj.sim.scene_model import Fruit
 
     target = Fruit("target", np.array([0.42, 0.0, 0.2]), 0.033, "red")
     settings = with_overrides(Settings(), measurement={"kind": "camera"}, episode={"views": 10})
@@ -252,7 +252,7 @@ def test_a_second_red_blob_in_the_rendered_scene_does_not_capture_the_estimate(k
     import cv2
 
     from bve_mj.config import DetectorConfig
-    from bve_mj.perception.detector import red_mask
+    from bve_mj.perception.masks import red_mask
 
     class CountRedBlobs:  # a recorder that checks the second red blob is really in view
         def attach(self, world, prior):  # type: ignore[no-untyped-def]

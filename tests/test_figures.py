@@ -25,7 +25,7 @@ import bve_mj.reporting.plots as plots
 from bve_mj.campaigns.runner import CampaignResult
 from bve_mj.campaigns.spec import CampaignSpec, Cell
 from bve_mj.config import Settings
-from bve_mj.reporting.campaign_report import plot_campaign
+from bve_mj.reporting.campaign_plots import plot_campaign
 
 
 def _row(cell: Cell, run: int, rng: np.random.Generator, still: bool = False) -> dict[str, Any]:
@@ -226,7 +226,7 @@ def test_wrap_title_fits_the_width() -> None:
 
 
 def test_video_framing_and_projection() -> None:
-    from bve_mj.reporting.video import _axes, _frame, _View
+    from bve_mj.reporting.overlay import _axes, _frame, _View
 
     rng = np.random.default_rng(1)
     pts = np.array([0.4, 0.0, 0.3]) + rng.uniform(-0.15, 0.15, (30, 3))
@@ -249,8 +249,8 @@ def test_video_framing_and_projection() -> None:
 def test_eye_overlay_says_which_range_is_measured_and_which_true(monkeypatch: pytest.MonkeyPatch) -> None:
     import cv2
 
-    from bve_mj.perception.detector import Detection, NoDetection
-    from bve_mj.reporting.video import draw_detection
+    from bve_mj.perception.detection import Detection, NoDetection
+    from bve_mj.reporting.overlay import draw_detection
 
     written: list[str] = []
     real = cv2.putText

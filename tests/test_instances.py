@@ -20,7 +20,8 @@ from bve_mj.perception import Detection, Intrinsics, NoDetection, Prediction, de
 from bve_mj.perception.instances import concave_corners, group_arcs, hull_points, outline_arcs
 from bve_mj.robot import ArmKinematics, get_robot
 from bve_mj.sim.render import OffscreenRenderer
-from bve_mj.sim.scene import PROBE_CAMERA, Fruit, build_scene, set_probe_pose
+from bve_mj.sim.scene import build_scene, set_probe_pose
+from bve_mj.sim.scene_model import PROBE_CAMERA, Fruit
 
 CAMERA = CameraConfig()
 INTRINSICS = Intrinsics.from_camera(CAMERA)

@@ -12,7 +12,8 @@ from bve_mj.perception import Detection, Intrinsics, NoDetection, detect
 from bve_mj.robot import ArmKinematics, get_robot, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.render import OffscreenRenderer
-from bve_mj.sim.scene import PROBE_CAMERA, Fruit, build_scene, set_probe_pose
+from bve_mj.sim.scene import build_scene, set_probe_pose
+from bve_mj.sim.scene_model import PROBE_CAMERA, Fruit
 from bve_mj.sim.sensors import calibrated_intrinsics, noisy_image
 
 CAMERA = CameraConfig()
@@ -250,7 +251,7 @@ def test_the_arc_jackknife_flags_an_arc_that_is_not_the_fruits():
     grouped with the fruit's own: the fits without each arc disagree by about that much. The
     reference is the cone through every kept point (not the spheroid the detector reports,
     which for a flattened fruit sits a few pixels off it: that offset is no disagreement)."""
-    from bve_mj.perception.detector import _arc_jackknife
+    from bve_mj.perception.silhouette import _arc_jackknife
 
     axis = np.array([1.0, 0.1, -0.05])
     axis /= np.linalg.norm(axis)

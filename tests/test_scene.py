@@ -16,7 +16,8 @@ from bve_mj.config import SceneConfig, load_settings, settings_from_dict
 from bve_mj.errors import ConfigError
 from bve_mj.robot import arm_kinematics
 from bve_mj.sim import plants
-from bve_mj.sim.scene import RIPENESS, Fruit, SceneInfo, build_scene, fruit_geom_name
+from bve_mj.sim.scene import build_scene
+from bve_mj.sim.scene_model import RIPENESS, Fruit, SceneInfo, fruit_geom_name
 from bve_mj.sim.textures import RIPENESS_STAGES, cube_directions, fruit_texture, ripeness_stage
 
 REPO = Path(__file__).resolve().parents[1]

@@ -9,7 +9,7 @@ import pytest
 
 from bve_mj.config import CameraConfig, FilterConfig
 from bve_mj.estimation import BearingSizeModel, Belief
-from bve_mj.estimation.noise import fit_noise_model
+from bve_mj.estimation.noise_fit import fit_noise_model
 from bve_mj.estimation.view_correlation import (
     ViewCorrelation,
     discounted,

@@ -8,7 +8,7 @@ covariance saying so). Every detection is compared with the truth: the error of 
 bearing of the centre (the two normalised image coordinates) and of the apparent
 (equatorial) angular radius, in pixels (f · angle), beside what the detector saw (apparent
 radius, share of the outline, trimmed share, the fit's own σ and the arcs' jackknife
-spread). :func:`bve_mj.estimation.noise.fit_noise_model` turns the samples into the
+spread). :func:`bve_mj.estimation.noise_fit.fit_noise_model` turns the samples into the
 noise model the filter uses.
 
 Sensor realism is off here (no image noise unless the scenario asks for it, no calibration
@@ -29,7 +29,8 @@ import numpy as np
 
 from bve_mj.campaigns.scenarios import Scenario
 from bve_mj.errors import ConfigError
-from bve_mj.estimation.noise import NoiseModel, fit_noise_model
+from bve_mj.estimation.noise import NoiseModel
+from bve_mj.estimation.noise_fit import fit_noise_model
 
 __all__ = ["CalibrationData", "calibrate", "run_calibration", "sample_views"]
 
@@ -46,7 +47,8 @@ def sample_views(name: str, settings: Any, scene_seed: int, views: int) -> list[
     the arm could take, with the detector's answer and the truth."""
     import mujoco
 
-    from bve_mj.perception.detector import Detection, Intrinsics, Prediction, detect
+    from bve_mj.perception.detection import Detection, Intrinsics, Prediction
+    from bve_mj.perception.detector import detect
     from bve_mj.robot import IkOptions, arm_kinematics, look_at_ik
     from bve_mj.sim.arm import CAMERA_NAME
     from bve_mj.sim.mujoco_world import declared_noise
@@ -212,7 +214,7 @@ def calibrate(
     progress: Callable[[int, int], None] | None = None,
 ) -> tuple[NoiseModel, dict[str, Any], CalibrationData]:
     """Render and detect (:func:`run_calibration`), then fit the noise model
-    (:func:`~bve_mj.estimation.noise.fit_noise_model`): the model, how well it describes the
+    (:func:`~bve_mj.estimation.noise_fit.fit_noise_model`): the model, how well it describes the
     samples, and the samples. The default seed (1) keeps the scenario suite's episodes
     (seeds 0 and 7777 there) out of the calibration."""
     data = run_calibration(

@@ -27,7 +27,8 @@ from bve_mj.planning.constraints import ConstraintName
 from bve_mj.planning.plan import Planner
 from bve_mj.robot import ArmKinematics, IkOptions, arm_kinematics, look_at_ik, make_arm_planner
 from bve_mj.sim.mujoco_world import MujocoWorld
-from bve_mj.sim.scene import Fruit, SceneInfo, build_scene
+from bve_mj.sim.scene import build_scene
+from bve_mj.sim.scene_model import Fruit, SceneInfo
 from bve_mj.sim.world import World
 
 __all__ = ["MujocoEpisode", "Recorder", "episode_settings", "run_mujoco_episode", "state_prior"]

@@ -20,14 +20,15 @@ from bve_mj.config import FruitPrior, MeasurementConfig, Settings
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import BearingSizeModel, CameraModel, RangeModel, SizeModel
 from bve_mj.estimation.noise import NoiseModel, load_noise_model, measure
-from bve_mj.perception.detector import Detection, NoDetection, Prediction, detect
+from bve_mj.perception.detection import Detection, NoDetection, Prediction
+from bve_mj.perception.detector import detect
 from bve_mj.planning.plan import ViewPlan
 from bve_mj.robot.ik import look_at_ik
 from bve_mj.robot.kinematics import ArmKinematics
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.controller import JointTrajectoryController, MoveReport
 from bve_mj.sim.render import OffscreenRenderer
-from bve_mj.sim.scene import SceneInfo
+from bve_mj.sim.scene_model import SceneInfo
 from bve_mj.sim.sensors import calibrated_intrinsics, noisy_encoders, noisy_image
 from bve_mj.sim.world import Observation
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from bve_mj.config import CameraConfig, SensorConfig
-from bve_mj.perception.detector import Intrinsics
+from bve_mj.perception.detection import Intrinsics
 
 __all__ = ["calibrated_intrinsics", "noisy_encoders", "noisy_image"]
 

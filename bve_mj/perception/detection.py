@@ -1,0 +1,101 @@
+"""What the detector takes and gives: the camera's intrinsics, the predicted projection of the
+target, a detection (bearing, apparent size, covariance, what was seen) or the reason for none."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bve_mj.config import CameraConfig
+from bve_mj.geometry import pixel_rays, project_point
+
+__all__ = ["Detection", "Intrinsics", "NoDetection", "Prediction"]
+
+_CHI2_3_999 = 16.266  # χ²(3) quantile at 0.999: a candidate the estimate allows
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics the detector assumes (square pixels) [px]."""
+
+    focal_px: float
+    width_px: int
+    height_px: int
+    cx_offset_px: float = 0.0
+    cy_offset_px: float = 0.0
+
+    @classmethod
+    def from_camera(cls, camera: CameraConfig) -> Intrinsics:
+        return cls(camera.focal_px, camera.width_px, camera.height_px)
+
+    def rays(self, uv: np.ndarray) -> np.ndarray:
+        offset = np.array([self.cx_offset_px, self.cy_offset_px])
+        shifted = np.atleast_2d(np.asarray(uv, dtype=float)) - offset
+        return pixel_rays(shifted, self.focal_px, self.width_px, self.height_px)
+
+    def project(self, p_camera: np.ndarray) -> np.ndarray:
+        uv = project_point(p_camera, self.focal_px, self.width_px, self.height_px)
+        return uv + np.array([self.cx_offset_px, self.cy_offset_px])
+
+
+@dataclass(frozen=True)
+class Detection:
+    """A measured tomato.
+
+    Attributes:
+        centre_px: image of the fitted cone axis (u, v) [px].
+        radius_px: apparent radius f·tan α [px].
+        bearing_camera: unit direction to the fruit centre in the camera frame, (3,).
+        angular_radius_rad: α.
+        range_m: ρ = r / sin α with the assumed radius.
+        p_camera: fruit centre in the camera frame [m], (3,): the measurement z.
+        cov_camera: its covariance [m²], (3, 3): range σ along the bearing, lateral σ across.
+        area_px: blob area; boundary_points: silhouette points used in the fit;
+        trimmed_fraction: share of boundary points rejected as occluder or image edges.
+        arc_deg: how much of the fruit's outline the fit saw (10° sectors around its centre).
+        centre_fit_px, radius_fit_px: the fit's own 1σ of the centre (across the bearing, the
+            worse direction) and of the apparent radius, from its residuals and how much
+            outline it saw [px, as f·angle].
+        centre_jackknife_px, radius_jackknife_px: the spread of the fits that leave one arc
+            of the outline out (0 for a single arc) [px, as f·angle].
+    The noise model (:mod:`bve_mj.estimation.noise`) turns these into the measurement's σ.
+    """
+
+    centre_px: np.ndarray
+    radius_px: float
+    bearing_camera: np.ndarray
+    angular_radius_rad: float
+    range_m: float
+    p_camera: np.ndarray
+    cov_camera: np.ndarray
+    area_px: int
+    boundary_points: int
+    trimmed_fraction: float
+    arc_deg: float = 360.0
+    centre_fit_px: float = 0.0
+    radius_fit_px: float = 0.0
+    centre_jackknife_px: float = 0.0
+    radius_jackknife_px: float = 0.0
+
+
+@dataclass(frozen=True)
+class NoDetection:
+    """Nothing measured, and why (``ambiguous``: more than one fruit fits the estimate)."""
+
+    reason: str
+
+    @property
+    def ambiguous(self) -> bool:
+        return self.reason.startswith("ambiguous")
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Where the estimate puts the target, in the camera frame (x optical axis, y left, z up):
+    N(p_camera, cov_camera) [m]. It picks the target among the fruit in view by Mahalanobis
+    distance in 3-D (bearing and size-based range), not by pixel distance: a neighbour
+    nearer in the image but at the wrong range, or outside the estimate's spread, loses."""
+
+    p_camera: np.ndarray
+    cov_camera: np.ndarray
