@@ -34,11 +34,11 @@ def main() -> None:
         for name in ("E5", "E10"):
             t0 = time.perf_counter()
             recs = [run_synthetic(s, EXPERIMENTS[name], 0, r) for r in range(runs)]
-            plan_ms = np.concatenate([r.plan_ms for r in recs])
+            plan_ms = np.concatenate([r["plan_ms"] for r in recs])
             steps = plan_ms.size
-            feasible = steps - sum(r.restoring_steps for r in recs)
-            never = sum(not r.ever_feasible for r in recs)
-            err = np.mean([np.linalg.norm(r.truth - r.estimate) for r in recs]) * 1e3
+            feasible = steps - sum(r["restoring_steps"] for r in recs)
+            never = sum(not r["ever_feasible"] for r in recs)
+            err = np.mean([r["error_mm"] for r in recs])
             print(
                 f"{formulation:<11} {name:<4} {runs:4d} {np.median(plan_ms):9.2f} "
                 f"{np.percentile(plan_ms, 95):8.1f} {100 * feasible / steps:16.1f} {never:13d} "

@@ -59,7 +59,7 @@ def test_runs_are_paired_across_planners():
     base = with_overrides(Settings(), protocol={"steps": 3})
     a = run_synthetic(base, EXPERIMENTS["E1"], 5, 2)
     b = run_synthetic(with_overrides(base, planner={"kind": "circle"}), EXPERIMENTS["E2"], 5, 2)
-    np.testing.assert_array_equal(a.truth, b.truth)
+    np.testing.assert_array_equal(a["truth_m"], b["truth_m"])
 
 
 @pytest.mark.parametrize("measurement", ["range", "camera"])

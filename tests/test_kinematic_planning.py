@@ -47,11 +47,11 @@ def test_planned_viewpoints_are_reachable(experiment):
 def test_e5_runs_report_reachability():
     s = with_overrides(Settings(), protocol={"steps": 8})
     rec = run_synthetic(s, EXPERIMENTS["E5"], 0, 0)
-    assert np.all(np.isfinite(rec.estimate))
+    assert np.all(np.isfinite(rec["estimate_m"]))
     kin = ArmKinematics(get_robot("manipulator_h"), "emanual")
     # E5 starts at the arm's home pose, not at the protocol's unreachable random start
-    np.testing.assert_allclose(rec.plan_ms.shape, (8,))
-    assert rec.ever_feasible or rec.restoring_steps == 8
+    assert len(rec["plan_ms"]) == 8
+    assert rec["ever_feasible"] or rec["restoring_steps"] == 8
     assert np.linalg.norm(kin.camera_pose(kin.home)[0]) < 1.0
 
 

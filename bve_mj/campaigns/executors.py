@@ -12,6 +12,8 @@ from bve_mj.campaigns.spec import Cell
 from bve_mj.config import Settings
 from bve_mj.errors import ConfigError
 
+__all__ = ["Task", "chunks", "local_batches", "run_task"]
+
 # --------------------------------------------------------------------------- execution
 Task = tuple[Settings, tuple[tuple[Cell, int], ...], int]
 
@@ -19,7 +21,7 @@ Task = tuple[Settings, tuple[tuple[Cell, int], ...], int]
 T = TypeVar("T")
 
 
-def _run_task(task: Task) -> list[dict[str, Any]]:
+def run_task(task: Task) -> list[dict[str, Any]]:
     """Run a chunk; a run that crashes (a bug, not bad input) becomes a "crashed" row so
     that one bad run never takes down the other thousands (stored, retried on resume)."""
     from bve_mj.threads import one_blas_thread
@@ -69,14 +71,14 @@ def _dask_batches(tasks: list[Task], scheduler: str) -> Iterator[list[dict[str, 
         allowed = f"the address of a running Dask scheduler ({exc})"
         raise ConfigError("scheduler", scheduler, allowed) from None
     try:
-        futures = client.map(_run_task, tasks, pure=False)
+        futures = client.map(run_task, tasks, pure=False)
         for fut in as_completed(futures):
             yield fut.result()
     finally:
         client.close()
 
 
-def _chunks(items: list[tuple[Cell, int]], workers: int) -> list[tuple[tuple[Cell, int], ...]]:
+def chunks(items: list[tuple[Cell, int]], workers: int) -> list[tuple[tuple[Cell, int], ...]]:
     mujoco = [it for it in items if it[0].world == "mujoco"]
     synthetic = [it for it in items if it[0].world != "mujoco"]
     size = max(1, min(10, len(synthetic) // max(1, 4 * workers)))

@@ -25,12 +25,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bve_mj.campaigns.executors import Task, _chunks, _dask_batches, _run_task, local_batches
+from bve_mj.campaigns.executors import Task, _dask_batches, chunks, local_batches, run_task
 from bve_mj.campaigns.spec import CampaignSpec, Cell
 from bve_mj.campaigns.store import STORE_FORMAT, RunStore, code_identity
 from bve_mj.config import Settings, settings_to_dict
 from bve_mj.errors import ConfigError
 from bve_mj.loop.synthetic import for_robot
+
+__all__ = ["CampaignResult", "run_campaign"]
 
 
 @dataclass(frozen=True)
@@ -105,8 +107,8 @@ def run_campaign(
         resumed = total - len(todo)
         if progress is not None:
             progress(resumed, total)
-        tasks: list[Task] = [(settings, chunk, spec.seed) for chunk in _chunks(todo, workers)]
-        batches = _dask_batches(tasks, scheduler) if scheduler else local_batches(_run_task, tasks, workers)
+        tasks: list[Task] = [(settings, chunk, spec.seed) for chunk in chunks(todo, workers)]
+        batches = _dask_batches(tasks, scheduler) if scheduler else local_batches(run_task, tasks, workers)
         finished = resumed
         for batch in batches:
             store.add(batch)

@@ -15,6 +15,8 @@ from bve_mj.loop.episode import EpisodeResult
 from bve_mj.loop.synthetic import synthetic_episode
 from bve_mj.robot import arm_kinematics
 
+__all__ = ["radius_metrics", "run_cell"]
+
 
 def _row(
     cell: Cell,
@@ -51,7 +53,10 @@ def _row(
         "nees": float(d @ np.linalg.solve(final.cov, d)),
         "sigma_max_mm": float(np.sqrt(np.linalg.eigvalsh(final.cov)[-1])) * 1e3,
         "plan_ms_median": float(np.median([v.plan_s for v in planned])) * 1e3 if planned else 0.0,
+        "plan_ms": [v.plan_s * 1e3 for v in planned],
         "restoring_steps": sum(v.plan_status == "restoring" for v in planned),
+        "best_feasible_steps": sum(v.plan_status == "best_feasible" for v in planned),
+        "ever_feasible": any(v.plan_feasible for v in planned),
         "fallback_steps": sum(v.plan_status == "fallback" for v in planned),
         "events": result.event_counts(),
         "belief_finite": bool(finite),

@@ -14,6 +14,17 @@ from bve_mj.config import MeasurementKind, PlannerKind, Settings, WorldName, wit
 from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.errors import ConfigError
 
+__all__ = [
+    "MEASUREMENTS",
+    "PLANNERS",
+    "WORLDS",
+    "CampaignSpec",
+    "Cell",
+    "cell_settings",
+    "episode_seed",
+    "parse_grid",
+]
+
 WORLDS: tuple[str, ...] = get_args(WorldName)
 PLANNERS: tuple[str, ...] = get_args(PlannerKind)
 MEASUREMENTS: tuple[str, ...] = tuple(k for k in get_args(MeasurementKind) if k != "auto")

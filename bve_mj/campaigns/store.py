@@ -12,6 +12,8 @@ from typing import Any
 
 from bve_mj.errors import ConfigError
 
+__all__ = ["STORE_FORMAT", "RunStore", "code_identity"]
+
 STORE_FORMAT = 1
 
 

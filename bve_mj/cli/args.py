@@ -11,6 +11,22 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
+__all__ = [
+    "EXIT_FAILURE",
+    "EXIT_NOT_LOCALISED",
+    "EXIT_OK",
+    "EXIT_USAGE",
+    "Parser",
+    "UsageError",
+    "check_output_path",
+    "float_arg",
+    "given",
+    "grid_text",
+    "int_arg",
+    "progress_printer",
+    "version_text",
+]
+
 if TYPE_CHECKING:
     pass
 

@@ -24,6 +24,8 @@ if TYPE_CHECKING:
     from bve_mj.campaigns.spec import CampaignSpec
     from bve_mj.config import Settings
 
+__all__ = ["campaign_inputs", "cmd_campaign", "cmd_results"]
+
 
 def campaign_inputs(args: argparse.Namespace) -> tuple[Settings, CampaignSpec]:
     """``bve-mj campaign``/``recoverability``: the settings (file, then ``--steps``/``--views``)

@@ -15,6 +15,8 @@ from bve_mj.reporting.atomic import write_json_atomic
 if TYPE_CHECKING:
     from bve_mj.config import Settings
 
+__all__ = ["cmd_episode", "episode_cli_settings"]
+
 
 def episode_cli_settings(args: argparse.Namespace) -> Settings:
     """``bve-mj episode``'s settings: the ``--config`` file (or the defaults), then the options

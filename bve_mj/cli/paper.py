@@ -14,6 +14,8 @@ from bve_mj.reporting.tables import format_table
 if TYPE_CHECKING:
     from bve_mj.config import Settings
 
+__all__ = ["cmd_paper", "paper_settings"]
+
 
 def paper_settings(args: argparse.Namespace) -> Settings:
     """``bve-mj paper``'s settings: the ``--config`` file (or the defaults), then the options

@@ -7,6 +7,8 @@ from typing import TYPE_CHECKING
 
 from bve_mj.cli.args import Parser, version_text
 
+__all__ = ["build_parser"]
+
 if TYPE_CHECKING:
     pass
 

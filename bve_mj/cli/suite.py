@@ -10,6 +10,8 @@ from typing import TYPE_CHECKING
 from bve_mj.cli.args import EXIT_FAILURE, EXIT_OK, check_output_path, int_arg, progress_printer
 from bve_mj.reporting.atomic import write_json_atomic
 
+__all__ = ["cmd_calibrate", "cmd_scenarios"]
+
 if TYPE_CHECKING:
     pass
 

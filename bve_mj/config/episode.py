@@ -10,6 +10,8 @@ import numpy as np
 from bve_mj.config.fields import _non_negative, _number, _open_interval, _positive, _positive_int, _why
 from bve_mj.errors import ConfigError
 
+__all__ = ["DetectorConfig", "EpisodeConfig", "FaultConfig"]
+
 
 @dataclass(frozen=True, kw_only=True)
 class DetectorConfig:

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 from bve_mj.config.fields import ConstraintName, LossName
 from bve_mj.errors import ConfigError
 
+__all__ = ["EXPERIMENTS", "PAPER_RESULTS", "Experiment", "parse_experiments"]
+
 
 @dataclass(frozen=True)
 class Experiment:

@@ -10,6 +10,27 @@ import numpy as np
 
 from bve_mj.errors import ConfigError
 
+__all__ = [
+    "MAX_COUNT",
+    "MAX_MAGNITUDE",
+    "ConstraintName",
+    "FilterKind",
+    "Formulation",
+    "FruitType",
+    "LossName",
+    "MeasurementKind",
+    "OptimiserName",
+    "OtherTrussesRipeness",
+    "PlannerKind",
+    "PlanningModel",
+    "PriorSource",
+    "RipenessName",
+    "RobotName",
+    "StateKind",
+    "TrussLayout",
+    "WorldName",
+]
+
 MeasurementKind = Literal["auto", "range", "camera"]
 
 

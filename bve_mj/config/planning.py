@@ -24,6 +24,8 @@ from bve_mj.config.fields import (
 )
 from bve_mj.errors import ConfigError
 
+__all__ = ["ConstraintConfig", "PlannerConfig", "ProtocolConfig", "RobotConfig"]
+
 
 @dataclass(frozen=True, kw_only=True)
 class ConstraintConfig:

@@ -23,6 +23,8 @@ from bve_mj.config.fields import (
 )
 from bve_mj.errors import ConfigError
 
+__all__ = ["FRUIT_TYPE_DIAMETER_M", "FRUIT_TYPE_SHAPE_INDEX", "SceneConfig", "SensorConfig"]
+
 FRUIT_TYPE_DIAMETER_M: dict[str, tuple[float, float]] = {
     "cherry": (0.015, 0.030),
     "cocktail": (0.030, 0.045),

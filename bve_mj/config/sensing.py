@@ -24,6 +24,8 @@ from bve_mj.config.fields import (
 from bve_mj.config.scene import SceneConfig
 from bve_mj.errors import ConfigError
 
+__all__ = ["CameraConfig", "FilterConfig", "FruitPrior", "MeasurementConfig"]
+
 
 @dataclass(frozen=True, kw_only=True)
 class CameraConfig:

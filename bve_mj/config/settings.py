@@ -26,6 +26,16 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+__all__ = [
+    "SECTIONS",
+    "Settings",
+    "describe",
+    "load_settings",
+    "settings_from_dict",
+    "settings_to_dict",
+    "with_overrides",
+]
+
 
 @dataclass(frozen=True, kw_only=True)
 class Settings:

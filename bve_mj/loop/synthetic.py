@@ -21,6 +21,8 @@ from bve_mj.robot import arm_kinematics, get_robot, make_arm_planner
 from bve_mj.sim.synthetic import SyntheticWorld
 from bve_mj.sim.world import Scenario, World
 
+__all__ = ["for_robot", "sample_scenario", "synthetic_episode"]
+
 
 def sample_scenario(protocol: ProtocolConfig, rng: np.random.Generator) -> Scenario:
     """The paper's draw: fruit U[-1,1]³, camera U[-2,2]³, estimate = fruit + U[-e,e]³ [m]."""

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
+__all__ = ["fmt", "format_table"]
+
 if TYPE_CHECKING:
     pass
 
