@@ -21,7 +21,7 @@ from bve_mj.campaigns.spec import CampaignSpec
 
 
 def _stable(rows: tuple[dict, ...]) -> list[dict]:
-    return [{k: v for k, v in r.items() if k not in ("wall_s", "plan_ms_median")} for r in rows]
+    return [{k: v for k, v in r.items() if k not in ("wall_s", "plan_ms_median", "plan_ms")} for r in rows]
 
 
 def main() -> None:
