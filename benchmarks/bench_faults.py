@@ -46,7 +46,7 @@ def main() -> None:
     out = Path(tmp.name) if tmp is not None else args.out
     t0 = time.perf_counter()
     every: list[dict] = []
-    print(f"fault suite: {len(scenarios)} scenarios x {runs} episodes, faults of {FAULTS.name}, seed {args.seed}")
+    print(f"fault suite: {len(scenarios)} scenarios x {runs} episodes, {FAULTS.name}, seed {args.seed}")
     print(f"{'scenario':<22}{'eps':>5}{'crash':>6}{'NaN':>5}{'limit':>6}{'inside':>7}{'silent':>7}"
           f"{'median':>8}{'p95':>8}{'max mm':>8}  outcomes")  # fmt: skip
     with one_blas_thread():

@@ -144,7 +144,7 @@ def test_error_by_view_draws_every_cell_in_a_panel_per_world_and_experiment(
 
 
 def test_many_panels_are_capped_with_a_title_that_says_so(tmp_path: Path, figures: dict[str, Any]) -> None:
-    import bve_mj.reporting.campaign_report as report
+    import bve_mj.reporting.campaign_plots as report
 
     cells = [Cell("synthetic", f"E{i}", "bve", "range", 0.1) for i in range(1, 11)]
     result = _result(tmp_path, cells, runs=1)

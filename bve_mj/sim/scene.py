@@ -37,7 +37,7 @@ import numpy as np
 from bve_mj.config import CameraConfig, SceneConfig
 from bve_mj.robot.kinematics import ArmKinematics
 from bve_mj.sim import plants
-from bve_mj.sim.arm import CAMERA_NAME, arm_spec
+from bve_mj.sim.arm import CAMERA_NAME, R_OPTICAL_MUJOCO, arm_spec
 from bve_mj.sim.crop import _draw_crop
 from bve_mj.sim.environment import _environment, _lights
 from bve_mj.sim.fruit_draw import _check_fruit
@@ -45,7 +45,6 @@ from bve_mj.sim.scene_geoms import _add_fruit, _add_mesh_geom, _truss_parts
 from bve_mj.sim.scene_model import (
     _CALYX,
     _OLD_STEM,
-    _Q_OPT_MJ,
     _STEM,
     _TRUSS,
     _TWINE,
@@ -55,6 +54,11 @@ from bve_mj.sim.scene_model import (
 )
 
 __all__ = ["build_scene", "set_probe_pose"]
+
+
+_Q_OPT_MJ = np.zeros(4)
+mujoco.mju_mat2Quat(_Q_OPT_MJ, R_OPTICAL_MUJOCO.reshape(9))
+"""The probe camera's orientation in its body: the paper's optical axes in MuJoCo's camera frame."""
 
 
 def build_scene(

@@ -37,9 +37,6 @@ FRUIT_COLOURS: dict[str, tuple[float, float, float, float]] = {
 """Mean skin colour of each ripeness class (``orange``: the legacy name of a turning fruit)."""
 
 
-_Q_OPT_MJ = np.zeros(4)
-
-
 _UP = np.array([0.0, 0.0, 1.0])
 
 
