@@ -90,6 +90,12 @@ def test_toml_round_trip_and_did_you_mean(tmp_path):
         (["paper", "--robot", "kuka"], "robot.name"),
         (["paper", "--robot", "ur5", "--joint-limits", "emanual"], "robot.joint_limits"),
         (["paper", "--formulation", "polar"], "robot.formulation"),
+        (["paper", "--runs", "1000000000000"], "runs"),  # bounded: not a run that never ends
+        (["paper", "--workers", "100000"], "workers"),
+        (["scenarios", "--seeds", "1000001"], "seeds"),
+        (["episode", "--views", "10001"], "views"),
+        (["episode", "--seed", str(2**63)], "seed"),
+        (["campaign", "--out", "out/never", "--runs", "99999999"], "runs"),
     ],
 )
 def test_cli_bad_input_exits_2_with_one_line(argv, field, capsys):

@@ -16,6 +16,8 @@ __all__ = [
     "EXIT_NOT_LOCALISED",
     "EXIT_OK",
     "EXIT_USAGE",
+    "INT_MAXIMA",
+    "MAX_RUNS",
     "Parser",
     "UsageError",
     "check_output_path",
@@ -63,17 +65,26 @@ def version_text() -> str:
         return "unknown (not installed)"
 
 
+INT_MAXIMA = {"seed": 2**63 - 1, "workers": 1024, "views": 10_000, "steps": 10_000}
+"""The largest value of each integer option; every other count (runs, seeds, scenes) at most
+``MAX_RUNS``: a mistyped ``--runs 1000000000000`` is an error, not a run that never ends."""
+MAX_RUNS = 100_000
+
+
 def int_arg(name: str, text: str | None, minimum: int) -> int | None:
+    """The integer option ``name`` (None when not given), within [minimum, its maximum]."""
     from bve_mj.errors import ConfigError
 
     if text is None:
         return None
+    maximum = INT_MAXIMA.get(name, MAX_RUNS)
+    allowed = f"an integer in [{minimum}, {maximum}]"
     try:
         value = int(text)
     except ValueError:
-        raise ConfigError(name, text, f"an integer >= {minimum}") from None
-    if value < minimum:
-        raise ConfigError(name, text, f"an integer >= {minimum}")
+        raise ConfigError(name, text, allowed) from None
+    if not minimum <= value <= maximum:
+        raise ConfigError(name, text, allowed)
     return value
 
 
