@@ -88,7 +88,7 @@ def _version() -> str:
         v = version("bve_mj")
     except PackageNotFoundError:  # pragma: no cover
         v = "unknown"
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]  # the package (this module moved into reporting/)
 
     def git(*args: str) -> str:
         return subprocess.run(
