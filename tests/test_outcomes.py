@@ -12,7 +12,14 @@ def test_outcomes_read_as_their_text_and_say_what_they_mean():
     assert Outcome.CONVERGED == "converged" and json.dumps({"o": Outcome.STALLED}) == '{"o": "stalled"}'
     assert {o for o in Outcome if o.success} == {Outcome.CONVERGED, Outcome.STABLE, Outcome.APPROACHED}
     not_localised = {o for o in Outcome if not o.localised}
-    assert not_localised == {"unreachable", "never_detected", "ambiguous", "unreliable", "approach_blocked"}
+    assert not_localised == {
+        "unreachable",
+        "never_detected",
+        "ambiguous",
+        "unreliable",
+        "approach_blocked",
+        "incomplete",
+    }
     assert not any(o.success for o in not_localised)
     assert Outcome.UNRELIABLE.note and "do not trust" in Outcome.UNRELIABLE.note
     assert Outcome.CONVERGED.note is None

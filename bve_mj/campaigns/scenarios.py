@@ -43,6 +43,7 @@ __all__ = [
     "run_suite",
     "suite_dir",
     "suite_json",
+    "suite_json_clean",
 ]
 
 """Outcomes that claim the fruit is localised."""
@@ -317,19 +318,20 @@ def format_suite(summaries: dict[str, dict[str, Any]], markdown: bool = False) -
     return [head, "-" * len(head), *(fmt.format(*r) for r in rows), note]
 
 
+def suite_json_clean(x: Any) -> Any:
+    """``x`` with every non-finite float replaced by None (JSON has no NaN)."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: suite_json_clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [suite_json_clean(v) for v in x]
+    return x
+
+
 def suite_json(result: SuiteResult) -> dict[str, Any]:
     """The ``--json`` document: per scenario under ``scenarios.<name>``, and the settings."""
-
-    def clean(x: Any) -> Any:
-        if isinstance(x, float) and not math.isfinite(x):
-            return None
-        if isinstance(x, dict):
-            return {k: clean(v) for k, v in x.items()}
-        if isinstance(x, (list, tuple)):
-            return [clean(v) for v in x]
-        return x
-
-    return clean(
+    return suite_json_clean(
         {
             "seed": result.seed,
             "seeds": result.seeds,

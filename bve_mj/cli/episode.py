@@ -22,8 +22,14 @@ def episode_cli_settings(args: argparse.Namespace) -> Settings:
     """``bve-mj episode``'s settings: the ``--config`` file (or the defaults), then the options
     given on the command line. :func:`bve_mj.loop.mujoco.run_mujoco_episode` resolves the
     closed loop's defaults, the same for the CLI and the Python API."""
-    from bve_mj.config import SensorConfig, Settings, load_settings, with_overrides
+    from typing import get_args
 
+    from bve_mj.config import FruitsMode, SensorConfig, Settings, load_settings, with_overrides
+    from bve_mj.errors import ConfigError
+
+    fruits = getattr(args, "fruits", None)
+    if fruits is not None and fruits not in get_args(FruitsMode):
+        raise ConfigError("fruits", fruits, "one of " + ", ".join(get_args(FruitsMode)))
     settings = load_settings(args.config) if args.config else Settings()
     settings = with_overrides(
         settings,
@@ -37,6 +43,7 @@ def episode_cli_settings(args: argparse.Namespace) -> Settings:
         measurement=given(kind=args.measurement),
         filter=given(kind=args.filter, state=args.state),
         robot=given(name=args.robot),
+        tracking=given(fruits=fruits),
     )
     if args.realistic:
         settings = dataclasses.replace(settings, sensor=SensorConfig.realistic())
@@ -57,6 +64,13 @@ def cmd_episode(args: argparse.Namespace) -> int:
 
         require_matplotlib("plots", args.plots)
     settings = episode_cli_settings(args)
+    if settings.tracking.fruits == "all":
+        from bve_mj.cli.fruits import run_every_fruit_cli
+
+        if video_path is not None or plots_prefix is not None:
+            what = "video" if video_path is not None else "plots"
+            raise ConfigError(what, getattr(args, what), "not with --fruits all (the one-target episode's)")
+        return run_every_fruit_cli(settings, seed, json_path, quiet=args.quiet)
 
     import numpy as np
 

@@ -9,6 +9,7 @@ from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.config.fields import (
     FilterKind,
     Formulation,
+    FruitsMode,
     MeasurementKind,
     OptimiserName,
     PlannerKind,
@@ -77,6 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ep.add_argument("--planning-model", default=None, help=one_of(PlanningModel))
     ep.add_argument("--robot", default=None, help=one_of(RobotName))
+    ep.add_argument(
+        "--fruits",
+        default=None,
+        help=f"{one_of(FruitsMode)}: the target fruit (default), or every ripe fruit of the truss",
+    )
     ep.add_argument("--approach", action="store_true", help="approach mode: end close to the fruit")
     ep.add_argument("--realistic", action="store_true", help="sensor realism on (noise, calibration error)")
     ep.add_argument("--video", default=None, help="write an mp4 of the approach path here")
@@ -168,6 +174,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sc.add_argument(
         "--state", default=None, help=f"{one_of(StateKind)} for every scenario (default: each file's)"
+    )
+    sc.add_argument(
+        "--fruits",
+        default=None,
+        help=f"{one_of(FruitsMode)}: localise the target (default) or every ripe fruit of each scene",
     )
     sc.add_argument("--dir", default=None, help="a folder of scenario TOML files instead of the suite")
     sc.add_argument("--workers", default=None, help="local processes (default: all cores)")

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from bve_mj.cli.args import EXIT_FAILURE, EXIT_OK, check_output_path, int_arg, progress_printer
 from bve_mj.reporting.atomic import write_json_atomic
@@ -34,7 +35,16 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
         require_matplotlib("plot", args.plot)
     if args.measurement is not None and args.measurement not in ("camera", "range"):
         raise ConfigError("measurement", args.measurement, "camera or range")
+    if args.fruits is not None and args.fruits not in ("target", "all"):
+        raise ConfigError("fruits", args.fruits, "one of target, all")
     suite = load_suite(args.dir, args.only.split(",") if args.only is not None else None)
+    if args.fruits == "all":
+        for name in ("measurement", "filter", "state", "plot"):
+            if getattr(args, name) is not None:
+                raise ConfigError(
+                    name, getattr(args, name), "not with --fruits all (camera, ekf, centre_radius)"
+                )
+        return _every_fruit(args, suite, seeds, seed, workers or 1, json_path)
     print(
         f"bve-mj scenarios: {len(suite)} scenarios x {seeds} seeds (base seed {seed}), measurement "
         f"{args.measurement or 'from each file'}, filter {args.filter or 'from each file'}, state "
@@ -64,6 +74,32 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
         print(f"wrote {plot_consistency(curves, plot_path, title)}")
     if json_path is not None:
         write_json_atomic(json_path, suite_json(result))
+        print(f"wrote {json_path}")
+    if result.crashed:
+        print(f"bve-mj: {len(result.crashed)} episodes crashed:", file=sys.stderr)
+        for line in result.crashed[:5]:
+            print(f"  {line}", file=sys.stderr)
+        return EXIT_FAILURE
+    return EXIT_OK
+
+
+def _every_fruit(
+    args: argparse.Namespace, suite: list[Any], seeds: int, seed: int, workers: int, json_path: Path | None
+) -> int:
+    """``bve-mj scenarios --fruits all``: every ripe fruit of each scene."""
+    from bve_mj.campaigns.fruit_suite import format_fruit_suite, run_fruit_suite
+    from bve_mj.campaigns.scenarios import suite_json_clean
+
+    print(f"bve-mj scenarios --fruits all: {len(suite)} scenarios x {seeds} seeds (base seed {seed})")
+    show = not args.quiet and sys.stderr.isatty()
+    result = run_fruit_suite(suite, seeds=seeds, seed=seed, workers=workers, progress=progress_printer(show))
+    summaries = {sc.name: result.summary(sc.name) for sc in result.scenarios}
+    for line in format_fruit_suite(summaries):
+        print(line)
+    print(f"wall time {result.wall_s:.1f} s")
+    if json_path is not None:
+        doc = {"seed": seed, "seeds": seeds, "wall_s": result.wall_s, "scenarios": summaries}
+        write_json_atomic(json_path, suite_json_clean(doc))
         print(f"wrote {json_path}")
     if result.crashed:
         print(f"bve-mj: {len(result.crashed)} episodes crashed:", file=sys.stderr)

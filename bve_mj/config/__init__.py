@@ -9,7 +9,8 @@ metres.
 
 Sections by part: :mod:`.sensing` (camera, fruit prior, measurement, filter),
 :mod:`.planning` (constraints, planner, protocol, robot), :mod:`.scene` (scene, sensors),
-:mod:`.episode` (detector, faults, episode); :mod:`.settings` holds them all, loads and
+:mod:`.episode` (detector, faults, episode), :mod:`.tracking` (every fruit of a truss);
+:mod:`.settings` holds them all, loads and
 describes them; the allowed values of every choice are defined once, in :mod:`.fields`.
 Each setting lives in one section, the one that owns it.
 
@@ -28,6 +29,7 @@ from bve_mj.config.fields import (
     ConstraintName,
     FilterKind,
     Formulation,
+    FruitsMode,
     FruitType,
     JointLimitSet,
     LossName,
@@ -58,6 +60,7 @@ from bve_mj.config.settings import (
     settings_to_dict,
     with_overrides,
 )
+from bve_mj.config.tracking import TrackingConfig
 
 __all__ = [
     "FRUIT_TYPE_DIAMETER_M",
@@ -76,6 +79,7 @@ __all__ = [
     "Formulation",
     "FruitPrior",
     "FruitType",
+    "FruitsMode",
     "JointLimitSet",
     "LossName",
     "MeasurementConfig",
@@ -95,6 +99,7 @@ __all__ = [
     "SensorConfig",
     "Settings",
     "StateKind",
+    "TrackingConfig",
     "TrussLayout",
     "WorldName",
     "WorldPreset",

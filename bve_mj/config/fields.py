@@ -17,6 +17,7 @@ __all__ = [
     "FilterKind",
     "Formulation",
     "FruitType",
+    "FruitsMode",
     "JointLimitSet",
     "LossName",
     "MeasurementKind",
@@ -168,6 +169,9 @@ TrussLayout = Literal["chain", "cluster"]
 
 
 RipenessName = Literal["green", "breaker", "turning", "pink", "light_red", "red"]
+
+
+FruitsMode = Literal["target", "all"]
 
 
 OtherTrussesRipeness = Literal["unripe", "mixed"]

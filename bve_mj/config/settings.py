@@ -30,6 +30,7 @@ from bve_mj.config.planning import ConstraintConfig, PlannerConfig, ProtocolConf
 from bve_mj.config.presets import PRESETS
 from bve_mj.config.scene import SceneConfig, SensorConfig
 from bve_mj.config.sensing import CameraConfig, FilterConfig, FruitPrior, MeasurementConfig
+from bve_mj.config.tracking import TrackingConfig
 from bve_mj.errors import ConfigError, SettingMovedWarning
 
 if sys.version_info >= (3, 11):
@@ -67,6 +68,7 @@ class Settings:
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     episode: EpisodeConfig = field(default_factory=EpisodeConfig)
     faults: FaultConfig = field(default_factory=FaultConfig)
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -231,6 +233,7 @@ SECTIONS: dict[str, type] = {
     "detector": DetectorConfig,
     "episode": EpisodeConfig,
     "faults": FaultConfig,
+    "tracking": TrackingConfig,
 }
 
 

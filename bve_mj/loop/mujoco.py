@@ -1,38 +1,44 @@
 """One closed-loop episode in the rendered greenhouse: the product's main job.
 
 Seeding: ``SeedSequence(seed)`` spawns the scene, the prior, the sensors and the planner
-streams, so the same seed gives the same episode whatever the planner or measurement.
+streams (:mod:`bve_mj.loop.start`), so the same seed gives the same episode whatever the
+planner or measurement.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import mujoco
 import numpy as np
 
-from bve_mj.config import EpisodeConfig, Settings, settings_to_dict, with_overrides
+from bve_mj.config import Settings, settings_to_dict, with_overrides
 from bve_mj.config.experiments import EXPERIMENTS
-from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
-from bve_mj.estimation.noise import load_noise_model
-from bve_mj.geometry import ray_frame
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.episode import EpisodeResult, StopRules, ViewRecord, run_episode
 from bve_mj.loop.faults import FaultyPlanner, FaultyWorld
 from bve_mj.loop.outcomes import Outcome
+from bve_mj.loop.start import detection_prior, start_episode, state_prior
 from bve_mj.planning.constraints import ConstraintName
 from bve_mj.planning.plan import Planner
-from bve_mj.robot import ArmKinematics, IkOptions, arm_kinematics, look_at_ik, make_arm_planner
+from bve_mj.robot import make_arm_planner
 from bve_mj.sim.mujoco_world import MujocoWorld
-from bve_mj.sim.scene import build_scene
 from bve_mj.sim.scene_model import Fruit, SceneInfo
 from bve_mj.sim.world import World
 
-__all__ = ["MujocoEpisode", "Recorder", "episode_settings", "run_mujoco_episode", "state_prior"]
+__all__ = [
+    "MujocoEpisode",
+    "Recorder",
+    "detection_prior",
+    "episode_constraints",
+    "episode_settings",
+    "run_mujoco_episode",
+    "state_prior",
+]
 
 
 class Recorder(Protocol):
@@ -198,78 +204,20 @@ class MujocoEpisode:
         return {"names": names[: belief.dim], "mean": belief.mean.tolist(), "covariance": belief.cov.tolist()}
 
 
+def episode_constraints(s: Settings) -> tuple[ConstraintName, ...]:
+    """The constraints an episode plans under: its experiment's, with the distance band added
+    (the arm's reach), or in approach mode removed (the camera comes close)."""
+    names: tuple[ConstraintName, ...] = tuple(EXPERIMENTS[s.episode.experiment.upper()].constraints)
+    if not s.episode.approach and "band" not in names:
+        names = (*names, "band")
+    if s.episode.approach:
+        names = tuple(n for n in names if n != "band")
+    return names
+
+
 INNOVATION_PRIOR_DOF = 6.0
 """How much the noise model's word counts against a fruit's own innovations (degrees of
 freedom, :class:`bve_mj.loop.claims.Claims`)."""
-
-START_MARGIN = 0.15
-"""A ready pose is taken once its joints all keep this share of their range from the limits."""
-
-
-def _start_configuration(
-    kin: ArmKinematics, estimate: np.ndarray, distance: float, rng: np.random.Generator
-) -> np.ndarray:
-    """A ready pose: the camera ``distance`` in front of the estimate (robot side), looking at it.
-
-    Viewing directions are tried in order of preference; for each, look-at IK from home and
-    from a few random configurations, keeping the solution farthest from the joint limits.
-    The first direction whose best solution keeps every joint ``START_MARGIN`` of its range
-    from the limits wins (else the best seen). A pose folded against its limits strands the
-    planner, which moves the arm locally: seed 0's approach once stalled 0.127 m from the
-    fruit with three joints at their limits.
-    """
-    best: tuple[float, np.ndarray] | None = None
-    single = IkOptions(restarts=0)
-    for elevation in (0.15, 0.35, -0.1, 0.6, -0.3):
-        for yaw in (0.0, 0.3, -0.3):
-            d = np.array([-math.cos(yaw), math.sin(yaw), elevation])
-            p = estimate + distance * d / np.linalg.norm(d)
-            for seed in (kin.home, *(kin.random_configuration(rng) for _ in range(7))):
-                ik = look_at_ik(kin, p, estimate, seed, rng, single)
-                if ik.success and (best is None or kin.limit_margin(ik.q) > best[0]):
-                    best = (kin.limit_margin(ik.q), ik.q)
-            if best is not None and best[0] >= START_MARGIN:
-                return best[1]
-    if best is None:
-        raise PlanningError(f"no reachable ready pose looks at the estimate {estimate.round(3).tolist()}")
-    return best[1]
-
-
-def detection_prior(
-    p_world_camera: np.ndarray,
-    truth: np.ndarray,
-    ep: EpisodeConfig,
-    rng: np.random.Generator,
-    fruit_radius_m: float,
-) -> Belief:
-    """The prior a first detection of the target from ``p_world_camera`` gives: on the ray to
-    the fruit, its range off by U[-e, e] (e = ``initial_error_m``; apparent size is a coarse
-    range cue) and its bearing by U[-l, l] in each direction across the ray
-    (l = :meth:`EpisodeConfig.lateral_error_m` of the assumed ``fruit_radius_m``); covariance
-    with those uniforms' σ along and across the ray (at least 1 mm). It says which fruit is
-    meant, where a cube around the fruit, in a truss, does not."""
-    ray = truth - p_world_camera
-    rho = float(np.linalg.norm(ray))
-    U = ray_frame(ray / rho)
-    e, lat = ep.initial_error_m, ep.lateral_error_m(fruit_radius_m)
-    offset = rng.uniform(-1.0, 1.0, 3) * np.array([e, lat, lat])
-    sigmas = np.maximum(np.array([e, lat, lat]) / math.sqrt(3.0), 1e-3)
-    return Belief(truth + U @ offset, U @ np.diag(sigmas**2) @ U.T)
-
-
-def state_prior(centre: Belief, settings: Settings) -> Belief:
-    """The prior over the whole state when the radius is in it: the centre's, the radius of
-    the fruit type (``fruit.radius_m``, uniform ± ``radius_spread_rel``: σ = spread·r/√3) and,
-    when the sensor declares a calibration error, the camera's biases (principal point as a
-    bearing offset σ = ``principal_point_error_px``/f, focal σ = ``focal_error_rel``; a
-    small floor keeps the covariance definite when one of them is 0)."""
-    fruit, sensor = settings.fruit, settings.sensor
-    sigma_r = max(fruit.radius_m * fruit.radius_spread_rel / math.sqrt(3.0), 1e-5)
-    biases = None
-    if settings.estimates_calibration:
-        pp = max(sensor.principal_point_error_px / settings.camera.focal_px, 1e-6)
-        biases = (pp, pp, max(sensor.focal_error_rel, 1e-6))
-    return centre.extended(fruit.radius_m, sigma_r, biases)
 
 
 def run_mujoco_episode(
@@ -308,59 +256,30 @@ def _run(
     recorder: Recorder | None,
     edit: Callable[[mujoco.MjSpec], None] | None,
 ) -> MujocoEpisode:
-    s = episode_settings(settings)
+    start = start_episode(episode_settings(settings), seed, target, distractors, leaves, edit)
+    s, kin, info, prior, noise = start.settings, start.kin, start.info, start.prior, start.noise
     ep = s.episode
-    noise = None
-    if s.filter.state == "centre_radius":  # a bad noise model file fails here, before any work
-        noise = load_noise_model(s.measurement.noise_model)
-        noise.check_camera(s.camera, s.measurement.noise_model)
-    scene_ss, prior_ss, sensor_ss, planner_ss, fault_ss = np.random.SeedSequence(seed).spawn(5)
-    kin = arm_kinematics(s.robot.name, s.robot.limit_set)
-    spec, info = build_scene(
-        kin, s.scene, np.random.default_rng(scene_ss), s.camera,
-        target=target, distractors=distractors, leaves=leaves,
-    )  # fmt: skip
-    if edit is not None:
-        edit(spec)
-    model = spec.compile()
-    prior_rng = np.random.default_rng(prior_ss)
-    truth = info.target.centre_m
-    coarse = truth + prior_rng.uniform(-ep.initial_error_m, ep.initial_error_m, 3)
-    cube = Belief.isotropic(coarse, max(ep.initial_error_m / math.sqrt(3.0), 1e-3))
-    try:
-        q_start = _start_configuration(kin, coarse, s.band_distance_m, prior_rng)
-    except PlanningError:  # the fruit is out of the arm's reach: a clear outcome, not a crash
+    q_start = start.q_start
+    if q_start is None:  # the fruit is out of the arm's reach: a clear outcome, not a crash
         return MujocoEpisode(
-            EpisodeResult(cube, (), 0.0, Outcome.UNREACHABLE), info, s, seed, kin.home.copy()
+            EpisodeResult(start.cube, (), 0.0, Outcome.UNREACHABLE), info, s, seed, kin.home.copy()
         )
-    if ep.prior == "cube":
-        prior = cube
-    else:
-        p_camera = kin.camera_pose(q_start)[0]
-        prior = detection_prior(p_camera, truth, ep, prior_rng, s.fruit.radius_m)
-    if s.filter.state == "centre_radius":
-        prior = state_prior(prior, s)
-    mean = prior.centre_m
     world = MujocoWorld(
-        s, kin, model, info, q_start, mean, np.random.default_rng(sensor_ss),
+        s, kin, start.model, info, q_start, prior.centre_m, np.random.default_rng(start.sensor_ss),
         keep_images=recorder is not None,
         on_step=None if recorder is None else recorder.on_step,
         noise=noise,
     )  # fmt: skip
     if recorder is not None:
         recorder.attach(world, prior)
+    names = episode_constraints(s)
     experiment = EXPERIMENTS[ep.experiment.upper()]
-    names: Sequence[ConstraintName] = experiment.constraints
-    if not ep.approach and "band" not in names:
-        names = (*names, "band")
-    if ep.approach:
-        names = tuple(n for n in names if n != "band")
     planner: Planner = make_arm_planner(
-        s, experiment.loss, names, kin, q_start, np.random.default_rng(planner_ss)
+        s, experiment.loss, names, kin, q_start, np.random.default_rng(start.planner_ss)
     )
     loop_world: World = world
     if s.faults.any:
-        fault_rng = np.random.default_rng(fault_ss)
+        fault_rng = np.random.default_rng(start.fault_ss)
         loop_world = FaultyWorld(world, s.faults, fault_rng)
         planner = FaultyPlanner(planner, s.faults.planner_failure_p, fault_rng)
     stop = (

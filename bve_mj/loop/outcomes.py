@@ -31,6 +31,9 @@ class Outcome(StrEnum):
     """No view told the target apart from a neighbour."""
     UNREACHABLE = "unreachable"
     """The arm cannot reach a pose that looks at the fruit."""
+    INCOMPLETE = "incomplete"
+    """Every fruit: every track is localised, but a fruit seen once was never seen again from
+    the views planned for it (its track was dropped)."""
 
     @property
     def success(self) -> bool:
@@ -44,7 +47,7 @@ class Outcome(StrEnum):
         camera could not come close: ``bve-mj episode`` then exits 3."""
         return self not in (
             Outcome.UNREACHABLE, Outcome.NEVER_DETECTED, Outcome.AMBIGUOUS, Outcome.UNRELIABLE,
-            Outcome.APPROACH_BLOCKED,
+            Outcome.APPROACH_BLOCKED, Outcome.INCOMPLETE,
         )  # fmt: skip
 
     @property
@@ -65,6 +68,9 @@ _NOTES = {
     Outcome.UNRELIABLE: "the final estimate is not supported by the measurements (fewer than two "
     "accepted since the last reset, or most recent ones gated out as disagreeing with it): do not "
     "trust it",
+    Outcome.INCOMPLETE: "every fruit tracked is localised, but something seen once (a fruit the "
+    "detector refused from every later view, or a false detection) was never seen again: the "
+    "zone may hold a fruit that is not localised",
     Outcome.STALLED: "the camera stopped moving (no better reachable view): more views would only "
     "repeat the same measurement",
 }

@@ -20,6 +20,7 @@ from bve_mj.config import FruitPrior, MeasurementConfig, Settings
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import BearingSizeModel, CameraModel, RangeModel, SizeModel
 from bve_mj.estimation.noise import NoiseModel, load_noise_model, measure
+from bve_mj.estimation.tracks import Sighting
 from bve_mj.perception.detection import Detection, NoDetection, Prediction
 from bve_mj.perception.detector import detect
 from bve_mj.planning.plan import ViewPlan
@@ -80,6 +81,7 @@ class _Last:
     q_encoders: np.ndarray | None = None
     image: np.ndarray | None = None
     measurement: tuple[np.ndarray, np.ndarray] | None = None  # z and its covariance as fused
+    every: Any = None  # every fruit's detections (FruitDetections), in the every-fruit loop
     timings: ViewTimings = field(default_factory=ViewTimings)
 
 
@@ -176,6 +178,11 @@ class MujocoWorld:
         self.last = _Last(ik_failed=True)
         self._target = np.asarray(plan.p_world_target, dtype=float).copy()
 
+    def set_step_hook(self, hook: Callable[[float], None] | None) -> None:
+        """Call ``hook(sim_time)`` after every physics step of the moves that follow (None:
+        no hook; it replaces the ``on_step`` given at construction)."""
+        self._on_step = hook
+
     # ------------------------------------------------------------------ World
     def move_camera(self, plan: ViewPlan) -> None:
         self.last = _Last()
@@ -239,6 +246,36 @@ class MujocoWorld:
         var = float(det.bearing_camera @ det.cov_camera @ det.bearing_camera)
         return Observation(np.array([det.range_m]), RangeModel(p, var))
 
+    def observe_all(self) -> tuple[list[Sighting], BearingSizeModel]:
+        """Every ripe fruit in view, each measured as the radius state's camera measurement
+        (bearing of the centre and apparent angular radius, the calibrated noise); and a model
+        at this view's camera pose (as the encoders report it) for visibility predictions."""
+        from bve_mj.perception.all_fruit import detect_all
+
+        if self.noise is None:
+            raise ValueError("every fruit is measured with the radius in the state (centre_radius)")
+        t0 = time.perf_counter()
+        image = noisy_image(self.renderer.render(self.data, CAMERA_NAME), self.settings.sensor, self._rng)
+        t1 = time.perf_counter()
+        q_enc, p, R = self._measured_pose()
+        self.last.q, self.last.q_encoders = self.q, q_enc
+        s = self.settings
+        found = detect_all(
+            image, self.intrinsics, self.fruit_prior, self.measurement, s.detector,
+            up_camera=R.T[:, 2], max_range_m=s.tracking.max_range_m,
+        )  # fmt: skip
+        self.last.every = found
+        self.last.timings.render_s = t1 - t0
+        self.last.timings.detect_s = time.perf_counter() - t1
+        if self._keep_images:
+            self.last.image = image
+        sightings = []
+        for det in found.detections:
+            z, cov = measure(det, self.noise, s.fruit.shape_index, self.intrinsics.focal_px)
+            cov[:2, :2] += np.eye(2) * (2.5 * s.sensor.encoder_noise_rad) ** 2
+            sightings.append(Sighting(z, BearingSizeModel(p, R, cov)))
+        return sightings, BearingSizeModel(p, R, np.eye(3) * 1e-8)
+
     def view_info(self) -> dict[str, Any]:
         """What happened in the last view, JSON-ready."""
         last = self.last
@@ -275,6 +312,12 @@ class MujocoWorld:
             out["detection"] = {"none": det.reason}
             if det.ambiguous:
                 out["events"] = ["ambiguous"]
+        if last.every is not None:
+            out["detections"] = [
+                {"centre_px": d.centre_px.tolist(), "radius_px": d.radius_px, "arc_deg": d.arc_deg}
+                for d in last.every.detections
+            ]
+            out["refused"] = len(last.every.refused)
         return out
 
     def close(self) -> None:

@@ -8,7 +8,8 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from bve_mj.estimation.belief import Belief
-from bve_mj.estimation.models import MeasurementModel
+from bve_mj.estimation.models import BearingSizeModel, MeasurementModel
+from bve_mj.estimation.tracks import Sighting
 from bve_mj.planning.plan import ViewPlan
 
 __all__ = [
@@ -17,6 +18,7 @@ __all__ = [
     "ReadsEncoders",
     "ReportsViews",
     "Scenario",
+    "SeesEveryFruit",
     "SimulatedWorld",
     "World",
 ]
@@ -103,4 +105,32 @@ class SimulatedWorld(World, Protocol):
     @property
     def p_world_fruit(self) -> np.ndarray:
         """The true fruit centre [m], (3,)."""
+        ...
+
+
+class SeesEveryFruit(Protocol):
+    """A world that measures every ripe fruit in view (the multi-fruit loop's world): an arm
+    with a camera, whose views report what happened."""
+
+    @property
+    def p_world_camera(self) -> np.ndarray:
+        """Current camera position [m], (3,), as the encoders report it."""
+        ...
+
+    @property
+    def q_measured(self) -> np.ndarray | None:
+        """The joint angles the encoders read at the last view [rad] (None before one)."""
+        ...
+
+    def move_camera(self, plan: ViewPlan) -> None:
+        """Drive the camera to the plan's viewpoint, looking at its target."""
+        ...
+
+    def observe_all(self) -> tuple[list[Sighting], BearingSizeModel]:
+        """Every ripe fruit measured from the current pose, and a model at this view's camera
+        pose (its noise unused: for what the tracks predict the camera sees)."""
+        ...
+
+    def view_info(self) -> dict[str, Any]:
+        """The last view, JSON-ready."""
         ...

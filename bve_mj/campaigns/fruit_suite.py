@@ -1,0 +1,231 @@
+"""The scenario suite for every fruit: ``bve-mj scenarios --fruits all``.
+
+Each scenario runs ``seeds`` every-fruit episodes (:func:`bve_mj.loop.mujoco_fruits.
+run_every_fruit_episode`; episode ``i`` seeded as the one-target suite seeds it, so the same
+scene), and reports per scenario, over every true ripe fruit of the work zone of every
+episode: the share localised (a localised track within 5 mm of it), the share of episodes
+with no false track (a confirmed track on no fruit), the views per episode, the radius
+error, the fruit's NEES and the share inside the 3σ ellipsoid, the **silent** fruit (a track
+that claims it is localised while the truth lies outside its 99.9% ellipsoid), and the
+planning and association times.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bve_mj.campaigns.executors import local_batches
+from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario
+from bve_mj.campaigns.spec import episode_seed
+from bve_mj.config import Settings, with_overrides
+from bve_mj.errors import BveError, ConfigError
+
+__all__ = ["FruitSuiteResult", "format_fruit_suite", "run_fruit_suite"]
+
+LOCALISED_MM = 5.0
+"""A ripe fruit counts as localised when a localised track lies within this of it [mm]."""
+
+_Task = tuple[str, Settings, int, tuple[int, ...]]
+
+
+def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, Any]:
+    from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
+
+    ep_seed = episode_seed(seed, run)
+    try:
+        ep = run_every_fruit_episode(settings, ep_seed)
+    except BveError as exc:
+        return {
+            "scenario": name,
+            "run": run,
+            "episode_seed": ep_seed,
+            "outcome": "failed",
+            "message": str(exc),
+        }
+    matches, other, false = ep.matches()
+    fruits = []
+    for m in matches:
+        t = m.track
+        fruits.append(
+            {
+                "error_mm": m.error_mm if t is not None else None,
+                "nees": m.nees if t is not None else None,
+                "localised": bool(t is not None and t.localised),
+                "within": m.localised_within(LOCALISED_MM),
+                "radius_error_mm": None if t is None else 1e3 * (float(t.belief.mean[3]) - m.fruit.radius_m),
+            }
+        )
+    views = ep.result.views
+    return {
+        "scenario": name,
+        "run": run,
+        "episode_seed": ep_seed,
+        "outcome": ep.result.outcome,
+        "views": len(views),
+        "ripe": len(matches),
+        "fruits": fruits,
+        "false_tracks": len(false),
+        "other_tracks": len(other),
+        "plan_ms": [1e3 * v.plan_s for v in views[1:]],
+        "track_ms": [1e3 * v.track_s for v in views],
+        "tracks_max": max((len(v.fruits) for v in views), default=0),
+        "wall_s": ep.result.wall_s,
+    }
+
+
+def _run_task(task: _Task) -> list[dict[str, Any]]:
+    from bve_mj.threads import one_blas_thread
+
+    name, settings, seed, runs = task
+    with one_blas_thread():
+        rows = []
+        for run in runs:
+            try:
+                rows.append(_run_one(name, settings, seed, run))
+            except Exception as exc:  # a bug: one line, kept out of the metrics, exit 1
+                rows.append({"scenario": name, "run": run, "outcome": "crashed",
+                             "message": f"{type(exc).__name__}: {exc}"})  # fmt: skip
+        return rows
+
+
+@dataclass(frozen=True)
+class FruitSuiteResult:
+    """Every scenario's every-fruit episode rows (in run order)."""
+
+    scenarios: tuple[Scenario, ...]
+    rows: dict[str, tuple[dict[str, Any], ...]]
+    seed: int
+    seeds: int
+    wall_s: float
+
+    def summary(self, name: str) -> dict[str, Any]:
+        rows = self.rows[name]
+        ok = [r for r in rows if r["outcome"] not in ("failed", "crashed")]
+        fruits = [f for r in ok for f in r["fruits"]]
+        tracked = [f for f in fruits if f["error_mm"] is not None]
+        nees = np.array([f["nees"] for f in tracked]) if tracked else np.array([math.nan])
+        r_err = np.array([abs(f["radius_error_mm"]) for f in tracked]) if tracked else np.array([math.nan])
+        outcomes: dict[str, int] = {}
+        for r in rows:
+            outcomes[str(r["outcome"])] = outcomes.get(str(r["outcome"]), 0) + 1
+        plan = [x for r in ok for x in r["plan_ms"]]
+        track = [x for r in ok for x in r["track_ms"]]
+        return {
+            "outcomes": outcomes,
+            "ripe_fruit": len(fruits),
+            "localised_pct": 100.0 * float(np.mean([f["within"] for f in fruits])) if fruits else math.nan,
+            "all_localised_pct": 100.0 * float(np.mean([all(f["within"] for f in r["fruits"]) for r in ok]))
+            if ok
+            else math.nan,
+            "no_false_track_pct": 100.0 * float(np.mean([r["false_tracks"] == 0 for r in ok]))
+            if ok
+            else math.nan,
+            "false_tracks": int(sum(r["false_tracks"] for r in ok)),
+            "views_median": float(np.median([r["views"] for r in ok])) if ok else math.nan,
+            "error_mm_median": float(np.median([f["error_mm"] for f in tracked])) if tracked else math.nan,
+            "radius_error_mm_median": float(np.median(r_err)),
+            "nees_mean": float(np.mean(nees)),
+            "inside_3sigma_pct": 100.0 * float(np.mean(nees <= 9.0)),
+            "silent": int(sum(1 for f in tracked if f["localised"] and f["nees"] > SILENT_NEES)),
+            "plan_ms_median": float(np.median(plan)) if plan else math.nan,
+            "track_ms_median": float(np.median(track)) if track else math.nan,
+            "tracks_max": max((r["tracks_max"] for r in ok), default=0),
+            "wall_s": float(sum(r.get("wall_s", 0.0) for r in rows)),
+            "runs": list(rows),
+        }
+
+    @property
+    def crashed(self) -> list[str]:
+        return [
+            f"{r['scenario']} run {r['run']}: {r['message']}"
+            for rows in self.rows.values()
+            for r in rows
+            if r["outcome"] == "crashed"
+        ]
+
+
+def run_fruit_suite(
+    scenarios: Sequence[Scenario],
+    *,
+    seeds: int = 20,
+    seed: int = 0,
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> FruitSuiteResult:
+    """Run ``seeds`` every-fruit episodes of every scenario (camera measurement, the radius in
+    the state: the files' measurement and state are overridden)."""
+    for name, value, lo in (("seeds", seeds, 1), ("seed", seed, 0), ("workers", workers, 1)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+            raise ConfigError(name, value, f"an integer >= {lo}")
+    t0 = time.perf_counter()
+    settings = {
+        sc.name: with_overrides(sc.settings("camera", None, "centre_radius"), tracking={"fruits": "all"})
+        for sc in scenarios
+    }
+    chunk = max(1, min(5, seeds // max(1, 2 * workers)))
+    tasks: list[_Task] = [
+        (sc.name, settings[sc.name], seed, tuple(range(start, min(seeds, start + chunk))))
+        for sc in scenarios
+        for start in range(0, seeds, chunk)
+    ]
+    collected: dict[str, list[dict[str, Any]]] = {sc.name: [] for sc in scenarios}
+    total, done = len(scenarios) * seeds, 0
+    if progress is not None:
+        progress(0, total)
+    for batch in local_batches(_run_task, tasks, min(workers, len(tasks))):
+        for row in batch:
+            collected[row["scenario"]].append(row)
+        done += len(batch)
+        if progress is not None:
+            progress(done, total)
+    rows = {n: tuple(sorted(r, key=lambda x: x["run"])) for n, r in collected.items()}
+    return FruitSuiteResult(tuple(scenarios), rows, seed, seeds, time.perf_counter() - t0)
+
+
+def format_fruit_suite(summaries: dict[str, dict[str, Any]]) -> list[str]:
+    """The every-fruit table: scenario | outcomes | ripe fruit | localised % | episodes with
+    every one % | no false track % | views | error and radius error medians | NEES | in 3σ % |
+    silent | plan and association ms."""
+
+    def num(x: Any, spec: str) -> str:
+        return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
+
+    cols = ("scenario", "outcomes", "ripe", "loc%", "all%", "nofalse%", "views", "err mm", "r err mm",
+            "NEES", "in3σ%", "silent", "plan ms", "assoc ms")  # fmt: skip
+    rows = [
+        (
+            name,
+            " ".join(f"{k}:{v}" for k, v in sorted(s["outcomes"].items())),
+            str(s["ripe_fruit"]),
+            num(s["localised_pct"], ".1f"),
+            num(s["all_localised_pct"], ".0f"),
+            num(s["no_false_track_pct"], ".0f"),
+            num(s["views_median"], ".1f"),
+            num(s["error_mm_median"], ".2f"),
+            num(s["radius_error_mm_median"], ".2f"),
+            num(s["nees_mean"], ".2f"),
+            num(s["inside_3sigma_pct"], ".0f"),
+            str(s["silent"]),
+            num(s["plan_ms_median"], ".0f"),
+            num(s["track_ms_median"], ".2f"),
+        )
+        for name, s in summaries.items()
+    ]
+    widths = [max(len(c), *(len(r[i]) for r in rows)) for i, c in enumerate(cols)]
+    fmt = "  ".join(f"{{:<{w}}}" if i < 2 else f"{{:>{w}}}" for i, w in enumerate(widths))
+    head = fmt.format(*cols)
+    note = (
+        f"ripe: true ripe fruit in the work zones; loc%: of them, localised (a localised track within "
+        f"{LOCALISED_MM:g} mm); all%: episodes with every one localised; nofalse%: episodes with no "
+        "false track (a confirmed track on no fruit); views: median per episode; err, r err: median "
+        "centre and |radius| error of the tracked fruit; NEES: mean over them (3 if honest); silent: "
+        "fruit claimed localised with the truth outside the 99.9% ellipsoid; plan: median per view "
+        "(every candidate's BVE with the arm), assoc: association and update per view"
+    )
+    return [head, "-" * len(head), *(fmt.format(*r) for r in rows), note]

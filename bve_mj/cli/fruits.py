@@ -1,0 +1,84 @@
+"""``bve-mj episode --fruits all``: every ripe fruit of the truss, its table and JSON."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from bve_mj.cli.args import EXIT_NOT_LOCALISED, EXIT_OK
+from bve_mj.loop.outcomes import Outcome
+from bve_mj.reporting.atomic import write_json_atomic
+
+if TYPE_CHECKING:
+    from bve_mj.config import Settings
+
+__all__ = ["run_every_fruit_cli"]
+
+
+def run_every_fruit_cli(settings: Settings, seed: int, json_path: Path | None, *, quiet: bool = False) -> int:
+    """Run the every-fruit episode, print its views and fruit, write its JSON; the exit status
+    (0 when every ripe fruit's track is localised, 3 otherwise)."""
+    from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
+
+    episode = run_every_fruit_episode(settings, seed)
+    doc = episode.to_json()
+    s = episode.settings
+    print(
+        f"bve-mj episode --fruits all: seed {seed}, {s.episode.experiment}, planner={s.planner.kind}, "
+        f"work zone {1e3 * s.tracking.zone_m:.0f} mm around the target's prior; "
+        f"{len(doc['fruits'])} ripe fruit there"
+    )
+    if not quiet:
+        print(f"{'view':>4} {'plan':>13} {'for':>4} {'detected':>8} {'tracks':>6} {'localised':>9}  events")
+        for v in doc["views"]:
+            tracks = v["tracks"]
+            events = [e for e in v["events"] if not e.startswith("updated")]
+            print(
+                f"{v['view']:>4} {v['plan_status'] or 'start'!s:>13} "
+                f"{'-' if v['planned_for'] is None else v['planned_for']!s:>4} {v['detections']:>8} "
+                f"{len(tracks):>6} {sum(t['localised'] for t in tracks):>9}  {' '.join(events)[:60]}"
+            )
+    head = f"{'fruit':>12} {'colour':>9} {'track':>5} {'error mm':>9} {'NEES':>7}"
+    print(f"{head} {'radius mm':>17} {'localised':>9}")
+    for f in doc["fruits"]:
+        if f["track"] is None:
+            print(f"{f['name']:>12} {f['colour']:>9} {'-':>5} {'-':>9} {'-':>7} {'-':>17} {'no':>9}")
+            continue
+        radius = f"{f['radius_estimate_mm']:6.2f} ± {f['radius_sigma_mm']:4.2f} ({f['radius_mm']:.1f})"
+        print(
+            f"{f['name']:>12} {f['colour']:>9} {f['track']:>5} {f['error_mm']:9.2f} {f['nees']:7.2f} "
+            f"{radius:>17} {'yes' if f['localised'] else 'no':>9}"
+        )
+    within = sum(
+        1 for f in doc["fruits"] if f["localised"] and f["error_mm"] is not None and f["error_mm"] <= 5.0
+    )
+    n = len(doc["fruits"])
+    print(
+        f"outcome: {doc['outcome']}; {within} of {n} ripe fruit localised within 5 mm; "
+        f"{len(doc['unmatched_tracks'])} false tracks, {len(doc['other_tracks'])} on less ripe fruit; "
+        f"{len(doc['views'])} views; wall {doc['wall_s']:.2f} s"
+    )
+    plan = [v["plan_s"] for v in doc["views"][1:]]
+    track = [v["track_s"] for v in doc["views"]]
+    print(
+        f"median per view: plan {1e3 * float(np.median(plan)) if plan else math.nan:.1f} ms, "
+        f"association and update {1e3 * float(np.median(track)):.2f} ms"
+    )
+    if doc["harvest"] is not None:
+        h = doc["harvest"]
+        print(f"harvest order ({h['rule']}): {h['order']}")
+        for visit in h["visits"]:
+            print(
+                f"  track {visit['track']}: {'reached' if visit['reached'] else 'not reached'}, camera "
+                f"{1e3 * visit['true_distance_m']:.0f} mm from the fruit, least clearance "
+                f"{1e3 * visit['clearance_m']:.1f} mm" + (f" ({visit['reason']})" if visit["reason"] else "")
+            )
+    if json_path is not None:
+        write_json_atomic(json_path, doc)
+        print(f"wrote {json_path}")
+    outcome = Outcome(doc["outcome"])
+    all_found = n > 0 and all(f["localised"] for f in doc["fruits"])
+    return EXIT_OK if outcome.localised and all_found else EXIT_NOT_LOCALISED

@@ -1,0 +1,98 @@
+"""Settings of multi-fruit tracking: every ripe tomato in the work zone, one track each."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from bve_mj.config.fields import (
+    FruitsMode,
+    _choice,
+    _number,
+    _open_interval,
+    _positive,
+    _positive_int,
+    _why,
+)
+from bve_mj.errors import ConfigError
+
+__all__ = ["TrackingConfig"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackingConfig:
+    """Which fruit an episode localises, and how detections become tracks.
+
+    With ``fruits = "all"`` every ripe fruit the detector measures within ``zone_m`` of the
+    target's prior estimate gets a track (a belief over its centre and radius); detections are
+    assigned to tracks by a globally optimal assignment on their Mahalanobis distances, a new
+    track starts from one detection (its bearing, and a range from its apparent size, wide
+    along the ray), is confirmed after ``confirm_hits`` assignments and deleted when, never
+    confirmed, it is missed ``delete_misses`` times in views that should have seen it.
+    """
+
+    fruits: FruitsMode = field(
+        default="target",
+        metadata=_why(
+            "target: localise the one fruit the episode's prior points at (the paper's task); all: "
+            "every ripe fruit within zone_m of it, one track each, and plan views for all of them"
+        ),
+    )
+    zone_m: float = field(
+        default=0.15,
+        metadata=_why(
+            "the work zone: ripe fruit whose centre lies within this of the target's prior estimate "
+            "are tracked (a truss of 4-8 fruit spans 0.1-0.25 m); fruit beyond are another truss",
+            "m",
+        ),
+    )
+    max_range_m: float = field(
+        default=0.8,
+        metadata=_why("detections whose range exceeds this are ignored (the next row)", "m"),
+    )
+    gate_probability: float = field(
+        default=0.99999,
+        metadata=_why(
+            "a detection may be assigned to a track when its NIS is below the chi-square quantile "
+            "of this probability (3 components)"
+        ),
+    )
+    confirm_hits: int = field(
+        default=2, metadata=_why("a track is confirmed after this many assigned detections")
+    )
+    delete_misses: int = field(
+        default=2,
+        metadata=_why(
+            "a track never confirmed is deleted after this many views planned to see it missed it, "
+            "or three times as many views that should have seen it (in the image, its outline not "
+            "hidden by another track's)"
+        ),
+    )
+    merge_probability: float = field(
+        default=0.999,
+        metadata=_why(
+            "two tracks whose states agree at this level (chi-square, 4 components: centre and "
+            "radius) are one fruit, merged (two confirmed tracks only when also closer than their "
+            "mean radius)"
+        ),
+    )
+    candidates: int = field(
+        default=2,
+        metadata=_why(
+            "per view, the BVE plans a viewpoint for each of this many least localised fruit; the "
+            "one with the most joint information (sum over tracks) is taken"
+        ),
+    )
+
+    def __post_init__(self) -> None:
+        _choice("tracking", "fruits", self.fruits, FruitsMode)
+        for name in ("zone_m", "max_range_m"):
+            _positive("tracking", name, getattr(self, name))
+        for name in ("gate_probability", "merge_probability"):
+            _open_interval("tracking", name, getattr(self, name), 0.0, 1.0, "a probability in (0, 1)")
+        _positive_int("tracking", "confirm_hits", self.confirm_hits, 100)
+        _positive_int("tracking", "delete_misses", self.delete_misses, 100)
+        _positive_int("tracking", "candidates", self.candidates, 32)
+        if _number("tracking", "zone_m", self.zone_m) > self.max_range_m:
+            raise ConfigError(
+                "tracking.zone_m", self.zone_m, f"a number <= max_range_m ({self.max_range_m:g})"
+            )

@@ -1,0 +1,438 @@
+"""Tracks: one belief per fruit, and how each view's detections are assigned to them.
+
+A view measures every fruit it sees, each as z = (t_y/t_x, t_z/t_x, α) of
+:class:`~bve_mj.estimation.models.BearingSizeModel` (the bearing of its centre and its
+apparent angular radius). The tracker keeps one :class:`Track` per fruit (a belief over its
+centre and radius), and per view:
+
+1. **assigns** the detections to the tracks predicted visible by a globally optimal
+   assignment (the Hungarian algorithm, :func:`scipy.optimize.linear_sum_assignment`) on the
+   negative log-likelihood of each pair, NIS + ln det S, gated by the NIS (a detection no
+   track's gate admits cannot be assigned);
+2. **updates** each assigned track with its detection (the filter's update, the view
+   counted as the share of a fresh view it adds beside the track's earlier views when a view
+   correlation is given);
+3. **starts** a track from each detection left over whose fruit lies in the work zone: its
+   bearing fixes the centre's direction, its apparent size with the fruit type's radius
+   prior the range, so the belief is wide along the ray (:func:`belief_from_detection`);
+4. **counts a miss** for each track predicted visible (in the image, its outline not hidden
+   by another track's: :mod:`bve_mj.estimation.visibility`) that got no detection; a track
+   is confirmed after ``confirm_hits`` detections, and deleted when, never confirmed, the
+   views planned to see it missed it ``delete_misses`` times, or any views did three times
+   that often (a false detection is not seen again; a real fruit the detector refuses from
+   a poor view is, from a good one);
+5. **merges** duplicates: two tracks that are one fruit. Each track's belief is its own
+   detections and the radius prior, so their information adds, less the radius prior's
+   counted twice; they are merged when the fused belief agrees with both (χ² of the
+   difference of their states, ``merge_probability``) and, for two confirmed tracks, their
+   centres lie closer than a fruit's radius. Two tentative tracks of one fruit are two rays
+   that cross at it (each long along its ray), so for them agreement alone decides.
+
+A fruit hidden behind a nearer one is predicted hidden and not counted as missed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bve_mj.config import TrackingConfig
+from bve_mj.errors import EstimationError
+from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.ekf import UpdateResult, nis_threshold
+from bve_mj.estimation.models import BearingSizeModel
+from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
+
+__all__ = [
+    "Sighting",
+    "Track",
+    "TrackEvent",
+    "Tracker",
+    "ViewTracking",
+    "assign",
+    "belief_from_detection",
+]
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class Sighting:
+    """One fruit measured in one view: z = (t_y/t_x, t_z/t_x, α) and its model (the camera's
+    pose at the view and the measurement's covariance)."""
+
+    z: np.ndarray
+    model: BearingSizeModel
+
+
+@dataclass
+class Track:
+    """One fruit's belief and history (mutable: the :class:`Tracker` owns it).
+
+    Attributes:
+        id: unique within an episode, in order of creation.
+        belief: over the centre [m] and radius [m], (4,).
+        hits: detections assigned (the first, which started it, included).
+        misses: views that should have seen it (predicted visible) and did not.
+        failed: views planned to see it (its turn in the planner) that did not.
+        expected: views in which it was predicted visible.
+        confirmed: ``hits`` reached the confirmation count once.
+        first_view, last_view: the views that started it and last saw it.
+        innovations: (NIS, dimension) of its assigned detections after the first.
+        directions: unit directions fruit → camera of the views fused, for the correlation of
+            views from nearby directions (the first's included).
+    """
+
+    id: int
+    belief: Belief
+    first_view: int
+    last_view: int
+    hits: int = 1
+    misses: int = 0
+    failed: int = 0
+    expected: int = 0
+    confirmed: bool = False
+    innovations: list[tuple[float, int]] = field(default_factory=list)
+    directions: list[np.ndarray] = field(default_factory=list)
+
+    @property
+    def centre_m(self) -> np.ndarray:
+        return self.belief.centre_m
+
+    @property
+    def radius_m(self) -> float:
+        r = self.belief.radius_m
+        return float(r) if r is not None else float("nan")
+
+    @property
+    def missed_share(self) -> float:
+        """The share of the views expected to see it that did not."""
+        return self.misses / self.expected if self.expected else 0.0
+
+
+@dataclass(frozen=True)
+class TrackEvent:
+    """What happened to a track in a view: ``started``, ``updated``, ``missed``, ``confirmed``,
+    ``deleted``, ``merged`` (into ``other``)."""
+
+    kind: str
+    track: int
+    other: int | None = None
+
+
+@dataclass(frozen=True)
+class ViewTracking:
+    """What the tracker made of one view.
+
+    Attributes:
+        assigned: (detection index, track id) pairs.
+        started: (detection index, track id) pairs: the tracks started from detections.
+        ignored: detection indices neither assigned nor started (outside the work zone, or
+            within another track's gate but not assigned to it).
+        expected: track ids predicted visible in this view.
+        events: every :class:`TrackEvent` in order.
+    """
+
+    assigned: tuple[tuple[int, int], ...]
+    started: tuple[tuple[int, int], ...]
+    ignored: tuple[int, ...]
+    expected: tuple[int, ...]
+    events: tuple[TrackEvent, ...]
+
+
+def belief_from_detection(sighting: Sighting, radius_m: float, radius_sigma_m: float) -> Belief:
+    """The belief over (centre, radius) one detection gives with the radius prior
+    N(``radius_m``, ``radius_sigma_m``²): the centre on the ray of its bearing, at the range
+    ρ = r / sin α its apparent size gives with that radius; covariance by first-order
+    propagation of the measurement's noise and the radius' spread (so range and radius are
+    correlated, and the range is as uncertain as the radius is relatively).
+
+    Raises:
+        EstimationError: if the measurement is not a fruit in front of the camera.
+    """
+    z = np.asarray(sighting.z, dtype=float)
+    if z.shape != (3,) or not np.all(np.isfinite(z)) or not 0.0 < z[2] < 0.5 * math.pi:
+        raise EstimationError(f"a track starts from a detection (u, v, alpha), got {z!r}")
+    if not (radius_m > 0.0 and radius_sigma_m > 0.0):
+        raise EstimationError(f"radius prior must be > 0, got {radius_m!r} +- {radius_sigma_m!r}")
+    m = sighting.model
+    u, v, alpha = z
+    n = np.array([1.0, u, v])
+    norm = float(np.linalg.norm(n))
+    b = n / norm
+    rho = radius_m / math.sin(alpha)
+    R = m.R_world_camera
+    centre = m.p_world_camera + rho * (R @ b)
+    db_dn = (np.eye(3) - np.outer(b, b)) / norm
+    J = np.zeros((4, 4))  # ∂(centre, r) / ∂(u, v, α, r)
+    J[:3, 0] = rho * R @ db_dn[:, 1]
+    J[:3, 1] = rho * R @ db_dn[:, 2]
+    J[:3, 2] = R @ b * (-radius_m * math.cos(alpha) / math.sin(alpha) ** 2)
+    J[:3, 3] = R @ b / math.sin(alpha)
+    J[3, 3] = 1.0
+    noise = np.zeros((4, 4))
+    noise[:3, :3] = np.asarray(m.noise_cov_z, dtype=float)
+    noise[3, 3] = radius_sigma_m**2
+    cov = J @ noise @ J.T
+    cov += np.eye(4) * 1e-12  # the across-ray block is tiny but must stay definite
+    return Belief(np.concatenate([centre, [radius_m]]), cov)
+
+
+def _innovation(belief: Belief, s: Sighting) -> tuple[float, float]:
+    """(NIS, ln det S) of sighting ``s`` against ``belief``."""
+    x = belief.mean
+    y = np.asarray(s.z, dtype=float) - s.model.predict(x)
+    H = s.model.jacobian(x)
+    S = H @ belief.cov @ H.T + s.model.noise_cov
+    S = 0.5 * (S + S.T)
+    try:
+        L = np.linalg.cholesky(S)
+    except np.linalg.LinAlgError:
+        return math.inf, 0.0
+    w = np.linalg.solve(L, y)
+    return float(w @ w), 2.0 * float(np.sum(np.log(np.diag(L))))
+
+
+def assign(
+    beliefs: Sequence[Belief], sightings: Sequence[Sighting], gate_probability: float
+) -> tuple[list[tuple[int, int]], np.ndarray]:
+    """The globally optimal assignment of sightings to beliefs: (belief index, sighting index)
+    pairs minimising the summed negative log-likelihood NIS + ln det S over the pairs whose NIS
+    passes the gate (the χ²₃ quantile of ``gate_probability``); and the (n_beliefs,
+    n_sightings) NIS matrix (inf where the innovation covariance is singular)."""
+    nb, ns = len(beliefs), len(sightings)
+    nis = np.full((nb, ns), math.inf)
+    cost = np.full((nb, ns), math.inf)
+    for i, b in enumerate(beliefs):
+        for j, s in enumerate(sightings):
+            d2, logdet = _innovation(b, s)
+            nis[i, j] = d2
+            cost[i, j] = d2 + logdet
+    if nb == 0 or ns == 0:
+        return [], nis
+    gate = nis_threshold(gate_probability, 3)
+    allowed = nis <= gate
+    if not allowed.any():
+        return [], nis
+    from scipy.optimize import linear_sum_assignment
+
+    finite = cost[allowed]
+    big = float(np.max(finite) - np.min(finite)) * (nb + ns) + 1e6  # never worth taking
+    rows, cols = linear_sum_assignment(np.where(allowed, cost, big))
+    return [(int(i), int(j)) for i, j in zip(rows, cols, strict=True) if allowed[i, j]], nis
+
+
+class Tracker:
+    """Every fruit of the work zone, one :class:`Track` each (see the module docstring).
+
+    Args:
+        config: the tracking settings (gate, confirmation, deletion, merging, zone).
+        zone_centre_m: the centre of the work zone (the target's prior estimate) [m], (3,).
+        radius_prior: (mean, σ) of the fruit type's radius [m], for new tracks.
+        update: the filter's update (belief, z, model, gate) → :class:`UpdateResult`.
+        visible: ``visible(centres (n, 3), radii (n,), model) → (n,) bool``: which tracks the
+            camera of ``model`` (the view's) should see (in the image, outline not hidden).
+        correlation: how views from nearby directions share their errors (centre, radius);
+            None: views are independent.
+    """
+
+    def __init__(
+        self,
+        config: TrackingConfig,
+        zone_centre_m: np.ndarray,
+        radius_prior: tuple[float, float],
+        update: Callable[..., UpdateResult],
+        visible: Callable[[np.ndarray, np.ndarray, BearingSizeModel], np.ndarray],
+        correlation: tuple[ViewCorrelation, ViewCorrelation] | None = None,
+    ) -> None:
+        self.config = config
+        self.zone_centre_m = np.asarray(zone_centre_m, dtype=float).copy()
+        self.radius_prior = radius_prior
+        self._update = update
+        self._visible = visible
+        self._correlation = correlation
+        self.tracks: list[Track] = []
+        self.dropped: list[Track] = []  # deleted before they were confirmed
+        self._next_id = 0
+
+    # ------------------------------------------------------------------ queries
+    def track(self, track_id: int) -> Track:
+        for t in self.tracks:
+            if t.id == track_id:
+                return t
+        raise KeyError(track_id)
+
+    @property
+    def confirmed(self) -> list[Track]:
+        return [t for t in self.tracks if t.confirmed]
+
+    def predicted_visible(self, model: BearingSizeModel) -> np.ndarray:
+        """(n_tracks,) bool: which tracks the camera of ``model`` should see."""
+        if not self.tracks:
+            return np.zeros(0, dtype=bool)
+        centres = np.array([t.centre_m for t in self.tracks])
+        radii = np.array([t.radius_m for t in self.tracks])
+        return np.asarray(self._visible(centres, radii, model), dtype=bool)
+
+    def seed(self, belief: Belief, view: int) -> Track:
+        """Start a confirmed track from a given belief (the target the episode was asked for)."""
+        t = Track(self._next_id, belief, view, view, confirmed=True)
+        self._next_id += 1
+        self.tracks.append(t)
+        return t
+
+    # ------------------------------------------------------------------ a view
+    def step(
+        self,
+        sightings: Sequence[Sighting],
+        camera: BearingSizeModel,
+        view: int,
+        planned_for: int | None = None,
+    ) -> ViewTracking:
+        """Assign this view's sightings, update, start, count misses, confirm, delete, merge.
+        ``camera``: a model at the view's camera pose (its noise unused), for visibility;
+        ``planned_for``: the track the view was planned to see.
+
+        Every track may be assigned a detection (a fruit predicted hidden may still show);
+        only a track predicted visible counts a miss when it gets none. A detection left over
+        that lies within some track's gate is not a new fruit (a fragment, or a fruit two
+        tracks compete for): it is ignored."""
+        cfg = self.config
+        events: list[TrackEvent] = []
+        seen = self.predicted_visible(camera)
+        expected = [t for t, s in zip(self.tracks, seen, strict=True) if s]
+        tracks = list(self.tracks)
+        pairs, nis = assign([t.belief for t in tracks], sightings, cfg.gate_probability)
+        assigned: list[tuple[int, int]] = []
+        for i, j in pairs:
+            self._fuse(tracks[i], sightings[j], view, events)
+            assigned.append((j, tracks[i].id))
+        done = {j for j, _ in assigned}
+        got = {tid for _, tid in assigned}
+        for t in expected:
+            t.expected += 1
+            if t.id not in got:
+                t.misses += 1
+                t.failed += t.id == planned_for
+                events.append(TrackEvent("missed", t.id))
+        gate = nis_threshold(cfg.gate_probability, 3)
+        started: list[tuple[int, int]] = []
+        ignored: list[int] = []
+        for j, s in enumerate(sightings):
+            if j in done:
+                continue
+            gated = nis.shape[0] > 0 and bool(np.any(nis[:, j] <= gate))
+            fresh = None if gated else self._start(s, view)
+            if fresh is None:
+                ignored.append(j)
+                continue
+            started.append((j, fresh.id))
+            events.append(TrackEvent("started", fresh.id))
+        events += self._merge()
+        for t in list(self.tracks):
+            if not t.confirmed and (t.failed >= cfg.delete_misses or t.misses >= 3 * cfg.delete_misses):
+                self.tracks.remove(t)
+                self.dropped.append(t)
+                events.append(TrackEvent("deleted", t.id))
+        return ViewTracking(
+            tuple(assigned), tuple(started), tuple(ignored), tuple(t.id for t in expected), tuple(events)
+        )
+
+    def _fuse(self, t: Track, s: Sighting, view: int, events: list[TrackEvent]) -> None:
+        model = s.model
+        direction = _unit(model.p_world_camera - t.centre_m)
+        if self._correlation is not None and t.directions:
+            taken = np.array(t.directions)
+            centre_share = new_view_share(self._correlation[0], taken, direction)[0]
+            radius_share = new_view_share(self._correlation[1], taken, direction)[0]
+            model = discounted(model, centre_share, radius_share)  # type: ignore[assignment]
+        result = self._update(t.belief, s.z, model, None)
+        t.belief = result.belief
+        t.hits += 1
+        t.last_view = view
+        t.innovations.append((result.nis, 3))
+        t.directions.append(direction)
+        events.append(TrackEvent("updated", t.id))
+        if not t.confirmed and t.hits >= self.config.confirm_hits:
+            t.confirmed = True
+            events.append(TrackEvent("confirmed", t.id))
+
+    def _start(self, s: Sighting, view: int) -> Track | None:
+        """A new track from sighting ``s``, if its fruit lies in the work zone and in range."""
+        cfg = self.config
+        try:
+            belief = belief_from_detection(s, *self.radius_prior)
+        except EstimationError:
+            return None
+        rng = float(np.linalg.norm(belief.centre_m - s.model.p_world_camera))
+        if rng > cfg.max_range_m or np.linalg.norm(belief.centre_m - self.zone_centre_m) > cfg.zone_m:
+            return None
+        t = Track(self._next_id, belief, view, view, confirmed=cfg.confirm_hits <= 1)
+        t.directions.append(_unit(s.model.p_world_camera - belief.centre_m))
+        self._next_id += 1
+        self.tracks.append(t)
+        return t
+
+    def _merge(self) -> list[TrackEvent]:
+        """Merge duplicate tracks (see the module docstring)."""
+        events: list[TrackEvent] = []
+        limit = nis_threshold(self.config.merge_probability, 4)
+        merged = True
+        while merged:
+            merged = False
+            for a, b in _pairs(self.tracks):
+                fused = self._fused(a.belief, b.belief)
+                if fused is None:
+                    continue
+                d = a.belief.mean - b.belief.mean
+                chi2 = float(d @ np.linalg.solve(a.belief.cov + b.belief.cov, d))
+                both = a.confirmed and b.confirmed
+                close = float(np.linalg.norm(a.centre_m - b.centre_m)) < 0.5 * (a.radius_m + b.radius_m)
+                if chi2 <= limit and (close or not both):
+                    keep, drop = (a, b) if (a.hits, -a.id) >= (b.hits, -b.id) else (b, a)
+                    keep.belief = fused
+                    keep.hits += drop.hits
+                    keep.confirmed = keep.confirmed or drop.confirmed or keep.hits >= self.config.confirm_hits
+                    keep.innovations += drop.innovations
+                    keep.directions += drop.directions
+                    keep.last_view = max(keep.last_view, drop.last_view)
+                    self.tracks.remove(drop)
+                    events.append(TrackEvent("merged", drop.id, keep.id))
+                    merged = True
+                    break
+        return events
+
+    def _fused(self, a: Belief, b: Belief) -> Belief | None:
+        """The belief of two tracks of one fruit: their information added, the radius prior's
+        counted once (each holds it). None when it is not positive definite."""
+        r0, sr = self.radius_prior
+        prior_info = np.zeros((4, 4))
+        prior_info[3, 3] = 1.0 / sr**2
+        try:
+            La, Lb = np.linalg.inv(a.cov), np.linalg.inv(b.cov)
+            L = La + Lb - prior_info
+            P = np.linalg.inv(L)
+            x = P @ (La @ a.mean + Lb @ b.mean - prior_info @ np.array([0.0, 0.0, 0.0, r0]))
+            return Belief(x, P)
+        except (np.linalg.LinAlgError, EstimationError):
+            return None
+
+    def snapshot(self) -> tuple[Track, ...]:
+        """Copies of the tracks (for records: later views do not change them)."""
+        return tuple(
+            dataclasses.replace(t, innovations=list(t.innovations), directions=list(t.directions))
+            for t in self.tracks
+        )
+
+
+def _pairs(tracks: list[Track]) -> list[tuple[Track, Track]]:
+    return [(a, b) for i, a in enumerate(tracks) for b in tracks[i + 1 :]]
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-12 else np.array([1.0, 0.0, 0.0])

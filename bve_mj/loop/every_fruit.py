@@ -1,0 +1,189 @@
+"""The episode loop for every fruit of a truss: observe all → assign → fuse each → plan for all
+→ move, until every fruit is localised.
+
+Each view measures every ripe fruit in the image; the :class:`~bve_mj.estimation.tracks.
+Tracker` assigns the detections to the fruit's tracks (or starts tracks), and the
+:class:`~bve_mj.planning.every_fruit.EveryFruitPlanner` chooses the next view by the joint
+information it gives the fruit not yet localised. A fruit is localised when its claimed
+σmax (the filter's, with the claims of :class:`~bve_mj.loop.claims.Claims`: the fruit's own
+offset, its innovations, the share of views that should have seen it and did not) is below
+``stop_sigma_m`` after at least ``converge_after`` detections. The episode ends
+``converged`` when every track is, ``incomplete`` when every track is but a track was
+dropped on the way (seen once, never again from the views planned for it: a fruit the
+detector could not measure again, or a false detection), ``max_views`` when the budget runs
+out first, and ``never_detected`` when no view measured a fruit.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from bve_mj.errors import BveError
+from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.tracks import Track, Tracker, ViewTracking
+from bve_mj.loop.claims import Claims
+from bve_mj.loop.events import Event
+from bve_mj.loop.outcomes import Outcome
+from bve_mj.planning.every_fruit import EveryFruitPlanner, FruitTarget
+from bve_mj.planning.plan import PlanStatus, ViewPlan
+from bve_mj.sim.world import SeesEveryFruit
+
+__all__ = ["FruitState", "FruitsResult", "FruitsView", "claimed", "run_every_fruit"]
+
+
+@dataclass(frozen=True)
+class FruitState:
+    """A track as a view left it.
+
+    Attributes:
+        id: the track's id.
+        belief: the claimed belief over its centre and radius (the filter's with the claims).
+        confirmed, hits, misses, expected: see :class:`~bve_mj.estimation.tracks.Track`.
+        localised: claimed σmax ≤ the stop threshold after enough detections.
+    """
+
+    id: int
+    belief: Belief
+    confirmed: bool
+    hits: int
+    misses: int
+    expected: int
+    localised: bool
+
+
+@dataclass(frozen=True)
+class FruitsView:
+    """One view of an every-fruit episode: where the camera was, whom the view was planned
+    for, how many fruit it detected, what the tracker did, and every track after it."""
+
+    iteration: int
+    p_world_camera: np.ndarray
+    planned_for: int | None
+    plan_status: PlanStatus | None
+    plan_feasible: bool
+    plan_s: float
+    track_s: float
+    detections: int
+    tracking: ViewTracking
+    fruits: tuple[FruitState, ...]
+    world: dict[str, object] | None = None
+    events: tuple[Event, ...] = ()
+
+
+@dataclass(frozen=True)
+class FruitsResult:
+    """A finished every-fruit episode."""
+
+    views: tuple[FruitsView, ...]
+    wall_s: float
+    outcome: Outcome
+
+    @property
+    def final(self) -> tuple[FruitState, ...]:
+        return self.views[-1].fruits if self.views else ()
+
+
+def claimed(track: Track, claims: Claims | None, stop_sigma_m: float, converge_after: int) -> FruitState:
+    """The state a track claims: its belief with the claims, and whether it is localised."""
+    belief = track.belief
+    if claims is not None:
+        belief = claims.claim(belief, track.innovations, track.missed_share)
+    localised = track.confirmed and track.hits >= converge_after and belief.sigma_max_m <= stop_sigma_m
+    return FruitState(
+        track.id, belief, track.confirmed, track.hits, track.misses, track.expected, bool(localised)
+    )
+
+
+def run_every_fruit(
+    world: SeesEveryFruit,
+    planner: EveryFruitPlanner,
+    tracker: Tracker,
+    steps: int,
+    stop_sigma_m: float,
+    converge_after: int,
+    claims: Claims | None = None,
+    on_view: Callable[[FruitsView], None] | None = None,
+) -> FruitsResult:
+    """Observe from the start pose, then up to ``steps`` times: plan for every fruit, move,
+    observe, track; stop when every track is localised (see the module docstring).
+
+    A planner that fails holds the camera where it is (event ``planner_failed``)."""
+    t0 = time.perf_counter()
+    views: list[FruitsView] = []
+
+    def look(i: int, plan: ViewPlan | None, target: int | None, events: list[Event]) -> None:
+        sightings, camera = world.observe_all()
+        t1 = time.perf_counter()
+        step = tracker.step(sightings, camera, i, target)
+        track_s = time.perf_counter() - t1
+        alive = {t.id for t in tracker.tracks}
+        for e in step.events:
+            if e.kind in ("deleted", "merged"):
+                planner.forget(e.track)
+        for _, tid in step.assigned:
+            if tid in alive:
+                planner.note_fused_view(tid, world.p_world_camera, tracker.track(tid).centre_m)
+        if target is not None and plan is not None and target not in {tid for _, tid in step.assigned}:
+            planner.note_failed_view(target, world.p_world_camera, plan.p_world_target)
+        info = world.view_info()
+        q = world.q_measured
+        if q is not None:
+            planner.set_configuration(q)
+        states = tuple(claimed(t, claims, stop_sigma_m, converge_after) for t in tracker.tracks)
+        views.append(
+            FruitsView(
+                i, world.p_world_camera, target, None if plan is None else plan.status,
+                True if plan is None else plan.feasible, 0.0 if plan is None else plan.plan_s,
+                track_s, len(sightings), step, states, info, tuple(events),
+            )
+        )  # fmt: skip
+        if on_view is not None:
+            on_view(views[-1])
+
+    look(0, None, None, [])
+    outcome: Outcome | None = None
+    for i in range(1, steps + 1):
+        states = views[-1].fruits
+        if states and all(s.localised for s in states):
+            outcome = Outcome.CONVERGED
+            break
+        targets = [
+            FruitTarget(
+                s.id, tracker.track(s.id).belief, s.localised, s.belief.sigma_max_m,
+                np.array(tracker.track(s.id).directions).reshape(-1, 3),
+            )
+            for s in states
+        ]  # fmt: skip
+        events: list[Event] = []
+        if not targets:  # nothing seen yet: look again from where the camera is
+            hold = ViewPlan(world.p_world_camera, tracker.zone_centre_m, "fallback", False, math.nan)
+            plan, target = hold, None
+            events.append(Event("planner_failed", "no fruit seen yet"))
+        else:
+            t_plan = time.perf_counter()
+            try:
+                plan, target = planner.plan(targets, world.p_world_camera, i, world.q_measured)
+            except (BveError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+                worst = max(targets, key=lambda f: f.sigma_max_m)
+                plan = ViewPlan(
+                    world.p_world_camera, worst.belief.centre_m, "fallback", False, math.nan,
+                    plan_s=time.perf_counter() - t_plan,
+                )  # fmt: skip
+                target = worst.id
+                events.append(Event("planner_failed", f"{type(exc).__name__}: {exc}"))
+        world.move_camera(plan)
+        look(i, plan, target, events)
+    else:
+        states = views[-1].fruits
+        if states and all(s.localised for s in states):
+            outcome = Outcome.CONVERGED
+    if outcome is None:
+        outcome = Outcome.MAX_VIEWS if any(v.detections for v in views) else Outcome.NEVER_DETECTED
+    elif outcome == Outcome.CONVERGED and tracker.dropped:
+        outcome = Outcome.INCOMPLETE
+    return FruitsResult(tuple(views), time.perf_counter() - t0, outcome)

@@ -1,0 +1,283 @@
+"""Every ripe fruit of the truss, in the rendered greenhouse: ``bve-mj episode --fruits all``.
+
+The episode starts as the one-target episode does (:mod:`bve_mj.loop.start`: the same scene,
+ready pose and prior for the same seed); the prior's mean is the centre of the work zone
+(``tracking.zone_m``): every ripe fruit measured there gets a track. Then the loop of
+:mod:`bve_mj.loop.every_fruit` runs until every track is localised, and (``--approach``) the
+arm visits each fruit in the harvest order (:mod:`bve_mj.loop.harvest`).
+
+Ground truth, for the report: the true ripe fruit (ripeness at least the detector's ripe
+class, red unless ``detector.ripe_class`` says otherwise) within the zone. Confirmed tracks
+are matched to the scene's fruit (any ripeness) by an optimal assignment on distance, within
+a fruit's radius; a confirmed track matched to no fruit is a false track.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from bve_mj.config import Settings, settings_to_dict, with_overrides
+from bve_mj.config.experiments import EXPERIMENTS
+from bve_mj.estimation import filter_update
+from bve_mj.estimation.models import BearingSizeModel
+from bve_mj.estimation.tracks import Tracker
+from bve_mj.estimation.view_correlation import new_view_share
+from bve_mj.estimation.visibility import visible_arc_deg
+from bve_mj.loop.claims import Claims
+from bve_mj.loop.every_fruit import FruitsResult, FruitState, run_every_fruit
+from bve_mj.loop.harvest import HarvestResult, harvest
+from bve_mj.loop.mujoco import INNOVATION_PRIOR_DOF, episode_constraints, episode_settings
+from bve_mj.loop.outcomes import Outcome
+from bve_mj.loop.start import start_episode
+from bve_mj.planning.every_fruit import EveryFruitPlanner, FruitTarget, information_gain
+from bve_mj.robot import make_arm_planner
+from bve_mj.sim.mujoco_world import MujocoWorld
+from bve_mj.sim.scene_model import RIPENESS, Fruit, SceneInfo
+
+__all__ = ["FruitMatch", "FruitsEpisode", "ripe_fruit_in_zone", "run_every_fruit_episode"]
+
+
+def ripe_fruit_in_zone(info: SceneInfo, settings: Settings, zone_centre_m: np.ndarray) -> list[Fruit]:
+    """The fruit the episode should localise: ripe (at least the detector's ripe class) and
+    within ``tracking.zone_m`` of the zone's centre."""
+    least = RIPENESS.index(settings.detector.ripe_class or "red")
+    out = []
+    for f in info.fruits:
+        colour = "turning" if f.colour == "orange" else f.colour
+        ripe = colour in RIPENESS and RIPENESS.index(colour) >= least
+        if ripe and np.linalg.norm(f.centre_m - zone_centre_m) <= settings.tracking.zone_m:
+            out.append(f)
+    return out
+
+
+@dataclass(frozen=True)
+class FruitMatch:
+    """A true ripe fruit and the confirmed track matched to it (None when none was)."""
+
+    fruit: Fruit
+    track: FruitState | None
+
+    @property
+    def error_mm(self) -> float:
+        if self.track is None:
+            return math.nan
+        return 1e3 * float(np.linalg.norm(self.track.belief.centre_m - self.fruit.centre_m))
+
+    @property
+    def nees(self) -> float:
+        return math.nan if self.track is None else self.track.belief.mahalanobis_sq(self.fruit.centre_m)
+
+    def localised_within(self, mm: float) -> bool:
+        return self.track is not None and self.track.localised and self.error_mm <= mm
+
+
+@dataclass(frozen=True)
+class FruitsEpisode:
+    """A finished every-fruit episode with its ground truth."""
+
+    result: FruitsResult
+    info: SceneInfo
+    settings: Settings
+    seed: int
+    zone_centre_m: np.ndarray
+    harvest: HarvestResult | None = None
+
+    @property
+    def ripe(self) -> list[Fruit]:
+        return ripe_fruit_in_zone(self.info, self.settings, self.zone_centre_m)
+
+    def matches(self) -> tuple[list[FruitMatch], list[FruitState], list[FruitState]]:
+        """(a match per true ripe fruit, confirmed tracks on other fruit (less ripe or outside
+        the zone), confirmed tracks on no fruit: false tracks)."""
+        from scipy.optimize import linear_sum_assignment
+
+        tracks = [t for t in self.result.final if t.confirmed]
+        fruits = list(self.info.fruits)
+        ripe = {f.name for f in self.ripe}
+        if not tracks:
+            return [FruitMatch(f, None) for f in self.ripe], [], []
+        d = np.array([[np.linalg.norm(t.belief.centre_m - f.centre_m) for f in fruits] for t in tracks])
+        limit = np.array([f.radius_m for f in fruits])[None, :]
+        rows, cols = linear_sum_assignment(np.where(d <= limit, d, 1e3))
+        by_fruit: dict[str, FruitState] = {}
+        matched: set[int] = set()
+        for i, j in zip(rows, cols, strict=True):
+            if d[i, j] <= limit[0, j]:
+                by_fruit[fruits[j].name] = tracks[i]
+                matched.add(int(i))
+        other = [
+            tracks[i] for i, j in zip(rows, cols, strict=True) if i in matched and fruits[j].name not in ripe
+        ]
+        false = [t for i, t in enumerate(tracks) if i not in matched]
+        return [FruitMatch(f, by_fruit.get(f.name)) for f in self.ripe], other, false
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``--json`` document of ``--fruits all``: settings, seed, per view the tracks and
+        what the tracker did, and ``fruits``: per true ripe fruit its truth, radius and the
+        matched track's estimate, radius, error, NEES and whether it is localised;
+        ``unmatched_tracks`` (false positives) and ``other_tracks`` (on fruit less ripe or
+        outside the zone)."""
+        matches, other, false = self.matches()
+        views = []
+        for v in self.result.views:
+            views.append(
+                {
+                    "view": v.iteration,
+                    "camera_position_m": v.p_world_camera.tolist(),
+                    "planned_for": v.planned_for,
+                    "plan_status": v.plan_status,
+                    "plan_s": v.plan_s,
+                    "track_s": v.track_s,
+                    "detections": v.detections,
+                    "assigned": [list(p) for p in v.tracking.assigned],
+                    "started": [list(p) for p in v.tracking.started],
+                    "ignored": list(v.tracking.ignored),
+                    "expected": list(v.tracking.expected),
+                    "events": [f"{e.kind}:{e.track}" for e in v.tracking.events] + [str(e) for e in v.events],
+                    "tracks": [_track_json(t) for t in v.fruits],
+                    "timings_s": (v.world or {}).get("timings_s"),
+                }
+            )
+        fruits = []
+        for m in matches:
+            t = m.track
+            fruits.append(
+                {
+                    "name": m.fruit.name,
+                    "truth_m": m.fruit.centre_m.tolist(),
+                    "radius_mm": 1e3 * m.fruit.radius_m,
+                    "colour": m.fruit.colour,
+                    "track": None if t is None else t.id,
+                    "estimate_m": None if t is None else t.belief.centre_m.tolist(),
+                    "radius_estimate_mm": None if t is None else 1e3 * float(t.belief.mean[3]),
+                    "radius_sigma_mm": None if t is None else 1e3 * float(math.sqrt(t.belief.cov[3, 3])),
+                    "error_mm": None if t is None else m.error_mm,
+                    "nees": None if t is None else m.nees,
+                    "localised": bool(t is not None and t.localised),
+                }
+            )
+        return {
+            "settings": settings_to_dict(self.settings),
+            "seed": self.seed,
+            "zone_centre_m": self.zone_centre_m.tolist(),
+            "views": views,
+            "fruits": fruits,
+            "unmatched_tracks": [_track_json(t) for t in false],
+            "other_tracks": [_track_json(t) for t in other],
+            "harvest": None if self.harvest is None else self.harvest.to_json(),
+            "outcome": self.result.outcome,
+            "wall_s": self.result.wall_s,
+        }
+
+
+def _track_json(t: FruitState) -> dict[str, Any]:
+    return {
+        "id": t.id,
+        "estimate_m": t.belief.centre_m.tolist(),
+        "covariance_m2": t.belief.cov[:3, :3].tolist(),
+        "radius_mm": 1e3 * float(t.belief.mean[3]),
+        "radius_sigma_mm": 1e3 * float(math.sqrt(t.belief.cov[3, 3])),
+        "sigma_max_mm": 1e3 * t.belief.sigma_max_m,
+        "confirmed": t.confirmed,
+        "hits": t.hits,
+        "misses": t.misses,
+        "localised": t.localised,
+    }
+
+
+def run_every_fruit_episode(settings: Settings, seed: int) -> FruitsEpisode:
+    """Build the seeded scene, start the arm at the one-target episode's ready pose, localise
+    every ripe fruit of the work zone, and (approach mode) visit each.
+
+    Raises:
+        ConfigError: when the settings cannot localise every fruit (the camera measurement
+            with the radius in the state is needed).
+    """
+    from bve_mj.errors import ConfigError
+    from bve_mj.threads import one_blas_thread
+
+    s = episode_settings(settings)
+    if s.measurement.kind != "camera" or s.filter.state != "centre_radius":
+        raise ConfigError(
+            "tracking.fruits", "all", "with measurement.kind = camera and filter.state = centre_radius"
+        )
+    # the search runs as a one-target episode without approach mode (with the distance band);
+    # approach mode visits the fruit afterwards
+    search = episode_settings(with_overrides(settings, episode={"approach": False}))
+    with one_blas_thread():
+        return _run(s, search, seed)
+
+
+def _run(s: Settings, search: Settings, seed: int) -> FruitsEpisode:
+    start = start_episode(search, seed)
+    kin, info, noise = start.kin, start.info, start.noise
+    zone = start.prior.centre_m.copy()
+    if start.q_start is None or noise is None:
+        return FruitsEpisode(FruitsResult((), 0.0, Outcome.UNREACHABLE), info, s, seed, zone)
+    ep, cam = s.episode, s.camera
+    world = MujocoWorld(
+        search,
+        kin,
+        start.model,
+        info,
+        start.q_start,
+        zone,
+        np.random.default_rng(start.sensor_ss),
+        noise=noise,
+    )
+    f = cam.focal_px
+    min_arc = s.detector.min_arc_deg
+    corr = (noise.centre_correlation, noise.radius_correlation)
+
+    def visible_from(centres: np.ndarray, radii: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
+        return visible_arc_deg(centres, radii, p, R, f, cam.width_px, cam.height_px) >= min_arc
+
+    def visible(centres: np.ndarray, radii: np.ndarray, model: BearingSizeModel) -> np.ndarray:
+        return visible_from(centres, radii, model.p_world_camera, model.R_world_camera)
+
+    def gain(fruit: FruitTarget, p: np.ndarray, R: np.ndarray) -> float:
+        x = fruit.belief.mean
+        rho = float(np.linalg.norm(x[:3] - p))
+        if rho <= x[3]:
+            return 0.0
+        radius_px = f * math.tan(math.asin(x[3] / rho))
+        sc, sr = noise.expected_sigmas_px(radius_px, s.fruit.shape_index)
+        cov = np.diag([(sc / f) ** 2, (sc / f) ** 2, (sr / f) ** 2])
+        if len(fruit.directions):
+            e = (p - x[:3]) / rho
+            share_c = new_view_share(corr[0], fruit.directions, e)[0]
+            share_r = new_view_share(corr[1], fruit.directions, e)[0]
+            g = np.sqrt([1.0 / share_c, 1.0 / share_c, 1.0 / share_r])
+            cov = cov * np.outer(g, g)
+        model = BearingSizeModel(p, R, cov)
+        return information_gain(fruit.belief, model.jacobian(x), cov)
+
+    names = episode_constraints(search)
+    loss = EXPERIMENTS[ep.experiment.upper()].loss
+    planner_rng = np.random.default_rng(start.planner_ss)
+    q0 = start.q_start
+
+    def make() -> Any:
+        q = world.q_measured if world.q_measured is not None else q0
+        return make_arm_planner(search, loss, names, kin, q, planner_rng)
+
+    planner = EveryFruitPlanner(make, gain, visible_from, s.tracking.candidates)
+    fruit = s.fruit
+    radius_prior = (fruit.radius_m, max(fruit.radius_m * fruit.radius_spread_rel / math.sqrt(3.0), 1e-5))
+    update = filter_update(s.filter.kind, s.filter.ekf_iterations)
+    tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr)
+    claims = Claims(noise.centre_bias_cov(fruit.radius_m), INNOVATION_PRIOR_DOF, noise.refusal_scale)
+    try:
+        result = run_every_fruit(
+            world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims
+        )
+        visits = None
+        if s.episode.approach and result.final:
+            visits = harvest(world, result.final, s, info)
+    finally:
+        world.close()
+    return FruitsEpisode(result, info, s, seed, zone, visits)

@@ -1,0 +1,168 @@
+"""How an episode starts: the seeded scene, the arm's ready pose, the prior.
+
+Seeding: ``SeedSequence(seed)`` spawns the scene, the prior, the sensors, the planner and the
+fault streams (in that order), so the same seed gives the same scene, start and noise
+whatever the planner, measurement or number of fruit localised.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from bve_mj.config import EpisodeConfig, Settings
+from bve_mj.errors import PlanningError
+from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.noise import NoiseModel, load_noise_model
+from bve_mj.geometry import ray_frame
+from bve_mj.robot import ArmKinematics, IkOptions, arm_kinematics, look_at_ik
+from bve_mj.sim.scene import build_scene
+from bve_mj.sim.scene_model import Fruit, SceneInfo
+
+__all__ = ["START_MARGIN", "EpisodeStart", "detection_prior", "start_episode", "state_prior"]
+
+
+START_MARGIN = 0.15
+"""A ready pose is taken once its joints all keep this share of their range from the limits."""
+
+
+def _start_configuration(
+    kin: ArmKinematics, estimate: np.ndarray, distance: float, rng: np.random.Generator
+) -> np.ndarray:
+    """A ready pose: the camera ``distance`` in front of the estimate (robot side), looking at it.
+
+    Viewing directions are tried in order of preference; for each, look-at IK from home and
+    from a few random configurations, keeping the solution farthest from the joint limits.
+    The first direction whose best solution keeps every joint ``START_MARGIN`` of its range
+    from the limits wins (else the best seen). A pose folded against its limits strands the
+    planner, which moves the arm locally: seed 0's approach once stalled 0.127 m from the
+    fruit with three joints at their limits.
+    """
+    best: tuple[float, np.ndarray] | None = None
+    single = IkOptions(restarts=0)
+    for elevation in (0.15, 0.35, -0.1, 0.6, -0.3):
+        for yaw in (0.0, 0.3, -0.3):
+            d = np.array([-math.cos(yaw), math.sin(yaw), elevation])
+            p = estimate + distance * d / np.linalg.norm(d)
+            for seed in (kin.home, *(kin.random_configuration(rng) for _ in range(7))):
+                ik = look_at_ik(kin, p, estimate, seed, rng, single)
+                if ik.success and (best is None or kin.limit_margin(ik.q) > best[0]):
+                    best = (kin.limit_margin(ik.q), ik.q)
+            if best is not None and best[0] >= START_MARGIN:
+                return best[1]
+    if best is None:
+        raise PlanningError(f"no reachable ready pose looks at the estimate {estimate.round(3).tolist()}")
+    return best[1]
+
+
+def detection_prior(
+    p_world_camera: np.ndarray,
+    truth: np.ndarray,
+    ep: EpisodeConfig,
+    rng: np.random.Generator,
+    fruit_radius_m: float,
+) -> Belief:
+    """The prior a first detection of the target from ``p_world_camera`` gives: on the ray to
+    the fruit, its range off by U[-e, e] (e = ``initial_error_m``; apparent size is a coarse
+    range cue) and its bearing by U[-l, l] in each direction across the ray
+    (l = :meth:`EpisodeConfig.lateral_error_m` of the assumed ``fruit_radius_m``); covariance
+    with those uniforms' σ along and across the ray (at least 1 mm). It says which fruit is
+    meant, where a cube around the fruit, in a truss, does not."""
+    ray = truth - p_world_camera
+    rho = float(np.linalg.norm(ray))
+    U = ray_frame(ray / rho)
+    e, lat = ep.initial_error_m, ep.lateral_error_m(fruit_radius_m)
+    offset = rng.uniform(-1.0, 1.0, 3) * np.array([e, lat, lat])
+    sigmas = np.maximum(np.array([e, lat, lat]) / math.sqrt(3.0), 1e-3)
+    return Belief(truth + U @ offset, U @ np.diag(sigmas**2) @ U.T)
+
+
+def state_prior(centre: Belief, settings: Settings) -> Belief:
+    """The prior over the whole state when the radius is in it: the centre's, the radius of
+    the fruit type (``fruit.radius_m``, uniform ± ``radius_spread_rel``: σ = spread·r/√3) and,
+    when the sensor declares a calibration error, the camera's biases (principal point as a
+    bearing offset σ = ``principal_point_error_px``/f, focal σ = ``focal_error_rel``; a
+    small floor keeps the covariance definite when one of them is 0)."""
+    fruit, sensor = settings.fruit, settings.sensor
+    sigma_r = max(fruit.radius_m * fruit.radius_spread_rel / math.sqrt(3.0), 1e-5)
+    biases = None
+    if settings.estimates_calibration:
+        pp = max(sensor.principal_point_error_px / settings.camera.focal_px, 1e-6)
+        biases = (pp, pp, max(sensor.focal_error_rel, 1e-6))
+    return centre.extended(fruit.radius_m, sigma_r, biases)
+
+
+@dataclass(frozen=True)
+class EpisodeStart:
+    """Everything an episode starts from.
+
+    Attributes:
+        settings: resolved for the MuJoCo world (approach mode applied).
+        kin: the arm's kinematics; model: the compiled scene; info: its ground truth.
+        q_start: the ready pose, or None when no pose looks at the fruit (unreachable).
+        cube: the coarse guess as an isotropic belief (the prior of an unreachable episode).
+        prior: the episode's prior (over the centre, and the radius when it is in the state).
+        noise: the detector's calibrated noise (with the radius in the state), else None.
+        sensor_ss, planner_ss, fault_ss: the seed streams of the sensors, planner, faults.
+    """
+
+    settings: Settings
+    kin: ArmKinematics
+    model: mujoco.MjModel
+    info: SceneInfo
+    q_start: np.ndarray | None
+    cube: Belief
+    prior: Belief
+    noise: NoiseModel | None
+    sensor_ss: np.random.SeedSequence
+    planner_ss: np.random.SeedSequence
+    fault_ss: np.random.SeedSequence
+
+
+def start_episode(
+    s: Settings,
+    seed: int,
+    target: Fruit | None = None,
+    distractors: tuple[Fruit, ...] | None = None,
+    leaves: bool = True,
+    edit: Callable[[mujoco.MjSpec], None] | None = None,
+) -> EpisodeStart:
+    """The seeded scene, the ready pose and the prior of an episode with the resolved settings
+    ``s`` (``target``/``distractors``/``leaves``/``edit``: see
+    :func:`bve_mj.loop.mujoco.run_mujoco_episode`). A bad noise model file fails here,
+    before any work."""
+    ep = s.episode
+    noise = None
+    if s.filter.state == "centre_radius":
+        noise = load_noise_model(s.measurement.noise_model)
+        noise.check_camera(s.camera, s.measurement.noise_model)
+    scene_ss, prior_ss, sensor_ss, planner_ss, fault_ss = np.random.SeedSequence(seed).spawn(5)
+    kin = arm_kinematics(s.robot.name, s.robot.limit_set)
+    spec, info = build_scene(
+        kin, s.scene, np.random.default_rng(scene_ss), s.camera,
+        target=target, distractors=distractors, leaves=leaves,
+    )  # fmt: skip
+    if edit is not None:
+        edit(spec)
+    model = spec.compile()
+    prior_rng = np.random.default_rng(prior_ss)
+    truth = info.target.centre_m
+    coarse = truth + prior_rng.uniform(-ep.initial_error_m, ep.initial_error_m, 3)
+    cube = Belief.isotropic(coarse, max(ep.initial_error_m / math.sqrt(3.0), 1e-3))
+    streams = (sensor_ss, planner_ss, fault_ss)
+    try:
+        q_start = _start_configuration(kin, coarse, s.band_distance_m, prior_rng)
+    except PlanningError:  # the fruit is out of the arm's reach: a clear outcome, not a crash
+        return EpisodeStart(s, kin, model, info, None, cube, cube, noise, *streams)
+    if ep.prior == "cube":
+        prior = cube
+    else:
+        p_camera = kin.camera_pose(q_start)[0]
+        prior = detection_prior(p_camera, truth, ep, prior_rng, s.fruit.radius_m)
+    if s.filter.state == "centre_radius":
+        prior = state_prior(prior, s)
+    return EpisodeStart(s, kin, model, info, q_start, cube, prior, noise, *streams)

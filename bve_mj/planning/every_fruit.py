@@ -1,0 +1,189 @@
+"""The next view for every fruit of a truss at once: the BVE's views for the least localised
+fruit, scored by the information they give all of them.
+
+Per view, the BVE (with every constraint and, in the closed loop, the arm's kinematics) plans
+a viewpoint for each of the ``candidates`` fruit whose claimed σmax is largest, each with its
+own planner (which remembers that fruit's failed and fused views). Each candidate viewpoint
+is then scored by the joint information it gives the fruit not yet localised,
+
+    J(c) = Σ_i [ln det P_i - ln det (P_i⁻¹ + H_iᵀ R_i⁻¹ H_i)⁻¹]_centre   over fruit i seen from c,
+
+the sum over fruit of the log-volume each one's centre uncertainty loses (the D-optimal
+criterion, summed: −ln det of each fruit's position covariance after the view), counting
+only the fruit the view is predicted to see (in the image, outline not hidden by another
+fruit's: :mod:`bve_mj.estimation.visibility`). The highest J wins; a fruit hidden from every
+candidate is left to later views. Why not optimise J itself: each fruit's BVE problem is
+smooth and the arm's joint-space solver handles one look-at target; J over a truss is a sum
+of terms switched on and off by occlusion, which a local optimiser cannot follow.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bve_mj.errors import BveError
+from bve_mj.estimation.belief import Belief
+from bve_mj.geometry import camera_rotation
+from bve_mj.planning.plan import (
+    LearnsFromFailedViews,
+    LearnsFromFusedViews,
+    Planner,
+    SyncsToEncoders,
+    ViewPlan,
+)
+
+__all__ = ["CandidateScore", "EveryFruitPlanner", "FruitTarget", "information_gain"]
+
+
+@dataclass(frozen=True)
+class FruitTarget:
+    """A fruit as the planner sees it: its track id, the filter's belief (centre, radius),
+    whether it is localised (its claimed σmax below the stop threshold), that σmax [m], and
+    the unit directions fruit → camera of the views fused (k, 3)."""
+
+    id: int
+    belief: Belief
+    localised: bool
+    sigma_max_m: float
+    directions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+
+@dataclass(frozen=True)
+class CandidateScore:
+    """One candidate viewpoint: planned for fruit ``planned_for``, its joint information J
+    [nats] and the fruit it is predicted to see."""
+
+    planned_for: int
+    score: float
+    sees: tuple[int, ...]
+    status: str
+
+
+def information_gain(belief: Belief, H: np.ndarray, noise_cov: np.ndarray) -> float:
+    """ln det P_c - ln det P'_c: how much the centre block of the covariance shrinks (in log
+    volume) when a measurement with Jacobian ``H`` (m, n) and noise ``noise_cov`` is fused."""
+    P = belief.cov
+    info = np.linalg.solve(noise_cov, H)
+    post = np.linalg.inv(np.linalg.inv(P) + H.T @ info)
+    before = np.linalg.slogdet(P[:3, :3])[1]
+    after = np.linalg.slogdet(post[:3, :3])[1]
+    return float(before - after)
+
+
+@dataclass
+class EveryFruitPlanner:
+    """Views for every fruit (see the module docstring).
+
+    Args:
+        make: a single-fruit planner for a new fruit (the BVE with the arm's kinematics).
+        gain: ``gain(fruit, p_world_camera, R_world_camera)``: the information one fruit gets
+            from a view (:func:`information_gain` of the measurement it would give).
+        visible: ``visible(centres (n, 3), radii (n,), p_world_camera, R_world_camera)`` →
+            (n,) bool: the fruit the view would see.
+        candidates: how many of the least localised fruit get a planned viewpoint.
+    """
+
+    make: Callable[[], Planner]
+    gain: Callable[[FruitTarget, np.ndarray, np.ndarray], float]
+    visible: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+    candidates: int = 2
+    _planners: dict[int, Planner] = field(default_factory=dict)
+    last_scores: tuple[CandidateScore, ...] = ()
+
+    def planner(self, fruit: int) -> Planner:
+        """The single-fruit planner of track ``fruit`` (made on first use)."""
+        if fruit not in self._planners:
+            self._planners[fruit] = self.make()
+        return self._planners[fruit]
+
+    def forget(self, fruit: int) -> None:
+        """Track ``fruit`` is gone (deleted or merged)."""
+        self._planners.pop(fruit, None)
+
+    def set_configuration(self, q: np.ndarray) -> None:
+        """Every fruit's planner plans the next move from the encoders' ``q``."""
+        for p in self._planners.values():
+            if isinstance(p, SyncsToEncoders):
+                p.set_configuration(q)
+
+    def note_failed_view(self, fruit: int, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        p = self._planners.get(fruit)
+        if isinstance(p, LearnsFromFailedViews):
+            p.note_failed_view(p_world_camera, p_world_target)
+
+    def note_fused_view(self, fruit: int, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        p = self._planners.get(fruit)
+        if isinstance(p, LearnsFromFusedViews):
+            p.note_fused_view(p_world_camera, p_world_target)
+
+    def plan(
+        self,
+        fruits: Sequence[FruitTarget],
+        p_world_camera: np.ndarray,
+        iteration: int,
+        q: np.ndarray | None = None,
+    ) -> tuple[ViewPlan, int]:
+        """The next viewpoint and the fruit it was planned for.
+
+        ``q``: the arm's joint angles now (each candidate's planner starts from them).
+
+        Raises:
+            BveError: when there is no fruit to plan for, or no candidate's planner succeeds.
+        """
+        t0 = time.perf_counter()
+        open_ = [f for f in fruits if not f.localised]
+        if not open_:
+            raise BveError("every fruit is localised: nothing to plan for")
+        chosen = sorted(open_, key=lambda f: -f.sigma_max_m)[: self.candidates]
+        centres = np.array([f.belief.centre_m for f in fruits])
+        radii = np.array([f.belief.radius_m or 0.0 for f in fruits])
+        best: tuple[float, ViewPlan, int] | None = None
+        scores: list[CandidateScore] = []
+        failures: list[str] = []
+        for target in chosen:
+            planner = self.planner(target.id)
+            if q is not None and isinstance(planner, SyncsToEncoders):
+                planner.set_configuration(q)
+            try:
+                plan = planner.plan(target.belief, p_world_camera, iteration)
+            except (BveError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+                failures.append(f"fruit {target.id}: {type(exc).__name__}: {exc}")
+                continue
+            if not (np.all(np.isfinite(plan.p_world_camera)) and np.all(np.isfinite(plan.p_world_target))):
+                failures.append(f"fruit {target.id}: non-finite viewpoint")
+                continue
+            R = camera_rotation(plan.p_world_camera, plan.p_world_target)
+            sees = np.asarray(self.visible(centres, radii, plan.p_world_camera, R), dtype=bool)
+            score = sum(
+                self.gain(f, plan.p_world_camera, R)
+                for f, s in zip(fruits, sees, strict=True)
+                if s and not f.localised
+            )
+            if not plan.feasible:
+                score -= 1e3  # a plan that breaks a constraint only when nothing else is left
+            scores.append(
+                CandidateScore(
+                    target.id,
+                    float(score),
+                    tuple(f.id for f, s in zip(fruits, sees, strict=True) if s),
+                    plan.status,
+                )
+            )
+            if best is None or score > best[0]:
+                best = (score, plan, target.id)
+        self.last_scores = tuple(scores)
+        if best is None:
+            raise BveError("no fruit's planner found a viewpoint: " + "; ".join(failures))
+        _, plan, fruit = best
+        if q is not None:
+            self.set_configuration(q)  # the candidates' planners moved their arm state
+        plan_s = time.perf_counter() - t0
+        return ViewPlan(
+            plan.p_world_camera, plan.p_world_target, plan.status, plan.feasible, plan.max_violation,
+            plan.loss, plan.iterations, plan_s, plan.q,
+        ), fruit  # fmt: skip
+

@@ -1,0 +1,127 @@
+"""Every fruit of a truss: the planner's joint information, the harvest order, the command
+line, and a seeded episode in the rendered greenhouse."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from bve_mj.config import Settings, with_overrides
+from bve_mj.estimation import BearingSizeModel, Belief
+from bve_mj.geometry import camera_rotation
+from bve_mj.loop.every_fruit import FruitState
+from bve_mj.loop.harvest import harvest_order
+from bve_mj.planning.every_fruit import EveryFruitPlanner, FruitTarget, information_gain
+from bve_mj.planning.plan import ViewPlan
+
+F, W, H = 466.0, 640, 480
+
+
+def test_information_gain_is_the_log_volume_the_centre_loses():
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(4, 4))
+    P = A @ A.T * 1e-5 + np.eye(4) * 1e-6
+    b = Belief(np.array([0.4, 0.0, 0.3, 0.03]), P)
+    p = np.array([0.1, 0.05, 0.35])
+    m = BearingSizeModel(p, camera_rotation(p, b.centre_m), np.eye(3) * 1e-6)
+    Hm = m.jacobian(b.mean)
+    # the Kalman update's posterior, the long way
+    S = Hm @ P @ Hm.T + m.noise_cov
+    K = P @ Hm.T @ np.linalg.inv(S)
+    post = (np.eye(4) - K @ Hm) @ P
+    expected = np.linalg.slogdet(P[:3, :3])[1] - np.linalg.slogdet(post[:3, :3])[1]
+    assert information_gain(b, Hm, m.noise_cov) == pytest.approx(expected, rel=1e-9)
+    assert information_gain(b, Hm, m.noise_cov * 1e6) < 1e-3 * expected
+
+
+class _Fixed:
+    """A single-fruit planner that proposes a fixed viewpoint."""
+
+    def __init__(self, p):
+        self.p = np.asarray(p, dtype=float)
+        self.planned = 0
+
+    def plan(self, belief, p_world_camera, iteration):
+        self.planned += 1
+        return ViewPlan(self.p, belief.centre_m, "optimal", True, 0.0)
+
+
+def _target(i, centre, sigma, localised=False):
+    return FruitTarget(i, Belief(np.r_[centre, 0.03], np.diag([sigma**2] * 3 + [1e-6])), localised, sigma)
+
+
+def test_the_view_that_sees_more_open_fruit_wins_and_a_hidden_one_counts_nothing():
+    a, b = np.array([0.5, 0.0, 0.3]), np.array([0.5, 0.08, 0.3])
+    front = np.array([0.2, 0.04, 0.3])  # sees both
+    behind_a = np.array([0.2, -0.12, 0.3])  # b hides behind a seen from here? no: far to the side
+    views = iter([_Fixed(behind_a), _Fixed(front)])
+
+    def gain(fruit, p, R):
+        return 1.0  # every fruit seen gains the same
+
+    def visible(centres, radii, p, R):
+        return np.array([True, np.allclose(p, front)])  # fruit b only from the front view
+
+    planner = EveryFruitPlanner(lambda: next(views), gain, visible, candidates=2)
+    fruits = [_target(0, a, 0.01), _target(1, b, 0.005)]
+    plan, planned_for = planner.plan(fruits, np.array([0.2, 0.0, 0.3]), 1)
+    assert np.allclose(plan.p_world_camera, front)
+    assert planned_for == 1
+    assert [s.score for s in planner.last_scores] == [1.0, 2.0]
+    # a localised fruit is no candidate and gains nothing
+    fruits = [_target(0, a, 0.01), _target(1, b, 0.0005, localised=True)]
+    planner.plan(fruits, np.array([0.2, 0.0, 0.3]), 2)
+    assert [s.planned_for for s in planner.last_scores] == [0]
+    assert planner.last_scores[0].score == 1.0
+    with pytest.raises(Exception, match="every fruit is localised"):
+        planner.plan([_target(0, a, 0.0005, localised=True)], np.zeros(3), 3)
+
+
+def _state(i, centre, radius=0.03):
+    return FruitState(i, Belief(np.r_[centre, radius], np.eye(4) * 1e-8), True, 3, 0, 3, True)
+
+
+def test_the_harvest_order_takes_the_exposed_fruit_before_the_hidden_then_the_nearest():
+    camera = np.array([0.1, 0.0, 0.3])
+    front = _state(0, [0.40, 0.0, 0.3])
+    behind = _state(1, [0.46, 0.01, 0.3])  # hidden behind `front` from the camera's side
+    far_side = _state(2, [0.45, 0.2, 0.3])  # alone, exposed, farther than `front`
+    order = harvest_order([behind, far_side, front], camera, F, W, H)
+    # the lone fruit shows its whole outline, the one in front loses where the one behind it
+    # touches it in the image (red on red), the one behind is hidden
+    assert order == [2, 0, 1]
+    # two fruit equally exposed: the nearest first
+    near, far = _state(3, [0.40, -0.2, 0.3]), _state(4, [0.55, 0.2, 0.3])
+    assert harvest_order([far, near], camera, F, W, H) == [3, 4]
+
+
+def _cli(*args):
+    return subprocess.run(
+        [sys.executable, "-m", "bve_mj.cli", *args], capture_output=True, text=True, timeout=120
+    )
+
+
+@pytest.mark.parametrize(
+    "args, field",
+    [
+        (["episode", "--fruits", "some"], "fruits"),
+        (["scenarios", "--fruits", "every"], "fruits"),
+        (["episode", "--fruits", "all", "--measurement", "range"], "tracking.fruits"),
+        (["scenarios", "--fruits", "all", "--measurement", "range"], "measurement"),
+    ],
+)
+def test_bad_fruits_input_exits_2_with_one_line(args, field):
+    r = _cli(*args)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and field in lines[0], r.stderr
+
+
+def test_a_tracking_section_is_validated():
+    with pytest.raises(Exception, match=r"tracking\.zone_m"):
+        with_overrides(Settings(), tracking={"zone_m": -1.0})
+    with pytest.raises(Exception, match=r"tracking\.zone_m"):
+        with_overrides(Settings(), tracking={"zone_m": 2.0})
+    with pytest.raises(Exception, match=r"tracking\.gate_probability"):
+        with_overrides(Settings(), tracking={"gate_probability": 1.0})
