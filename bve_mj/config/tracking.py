@@ -75,6 +75,16 @@ class TrackingConfig:
             "mean radius)"
         ),
     )
+    explore_span_deg: float = field(
+        default=40.0,
+        metadata=_why(
+            "before the episode says it found every fruit, its views must span this angle around "
+            "the work zone (directions seen from its centre): a fruit hidden behind its neighbours "
+            "from one side shows from another. Until then, once every track is localised, the BVE "
+            "plans for the zone itself, away from the views taken; 0 = no exploration",
+            "deg",
+        ),
+    )
     candidates: int = field(
         default=2,
         metadata=_why(
@@ -92,6 +102,8 @@ class TrackingConfig:
         _positive_int("tracking", "confirm_hits", self.confirm_hits, 100)
         _positive_int("tracking", "delete_misses", self.delete_misses, 100)
         _positive_int("tracking", "candidates", self.candidates, 32)
+        if not 0.0 <= _number("tracking", "explore_span_deg", self.explore_span_deg) <= 180.0:
+            raise ConfigError("tracking.explore_span_deg", self.explore_span_deg, "a number in [0, 180]")
         if _number("tracking", "zone_m", self.zone_m) > self.max_range_m:
             raise ConfigError(
                 "tracking.zone_m", self.zone_m, f"a number <= max_range_m ({self.max_range_m:g})"

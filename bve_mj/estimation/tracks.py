@@ -34,7 +34,6 @@ A fruit hidden behind a nearer one is predicted hidden and not counted as missed
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -42,31 +41,13 @@ import numpy as np
 
 from bve_mj.config import TrackingConfig
 from bve_mj.errors import EstimationError
+from bve_mj.estimation.assignment import Sighting, assign, belief_from_detection
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.ekf import UpdateResult, nis_threshold
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
 
-__all__ = [
-    "Sighting",
-    "Track",
-    "TrackEvent",
-    "Tracker",
-    "ViewTracking",
-    "assign",
-    "belief_from_detection",
-]
-
-_LOG_2PI = math.log(2.0 * math.pi)
-
-
-@dataclass(frozen=True)
-class Sighting:
-    """One fruit measured in one view: z = (t_y/t_x, t_z/t_x, α) and its model (the camera's
-    pose at the view and the measurement's covariance)."""
-
-    z: np.ndarray
-    model: BearingSizeModel
+__all__ = ["Sighting", "Track", "TrackEvent", "Tracker", "ViewTracking", "assign", "belief_from_detection"]
 
 
 @dataclass
@@ -142,88 +123,6 @@ class ViewTracking:
     ignored: tuple[int, ...]
     expected: tuple[int, ...]
     events: tuple[TrackEvent, ...]
-
-
-def belief_from_detection(sighting: Sighting, radius_m: float, radius_sigma_m: float) -> Belief:
-    """The belief over (centre, radius) one detection gives with the radius prior
-    N(``radius_m``, ``radius_sigma_m``²): the centre on the ray of its bearing, at the range
-    ρ = r / sin α its apparent size gives with that radius; covariance by first-order
-    propagation of the measurement's noise and the radius' spread (so range and radius are
-    correlated, and the range is as uncertain as the radius is relatively).
-
-    Raises:
-        EstimationError: if the measurement is not a fruit in front of the camera.
-    """
-    z = np.asarray(sighting.z, dtype=float)
-    if z.shape != (3,) or not np.all(np.isfinite(z)) or not 0.0 < z[2] < 0.5 * math.pi:
-        raise EstimationError(f"a track starts from a detection (u, v, alpha), got {z!r}")
-    if not (radius_m > 0.0 and radius_sigma_m > 0.0):
-        raise EstimationError(f"radius prior must be > 0, got {radius_m!r} +- {radius_sigma_m!r}")
-    m = sighting.model
-    u, v, alpha = z
-    n = np.array([1.0, u, v])
-    norm = float(np.linalg.norm(n))
-    b = n / norm
-    rho = radius_m / math.sin(alpha)
-    R = m.R_world_camera
-    centre = m.p_world_camera + rho * (R @ b)
-    db_dn = (np.eye(3) - np.outer(b, b)) / norm
-    J = np.zeros((4, 4))  # ∂(centre, r) / ∂(u, v, α, r)
-    J[:3, 0] = rho * R @ db_dn[:, 1]
-    J[:3, 1] = rho * R @ db_dn[:, 2]
-    J[:3, 2] = R @ b * (-radius_m * math.cos(alpha) / math.sin(alpha) ** 2)
-    J[:3, 3] = R @ b / math.sin(alpha)
-    J[3, 3] = 1.0
-    noise = np.zeros((4, 4))
-    noise[:3, :3] = np.asarray(m.noise_cov_z, dtype=float)
-    noise[3, 3] = radius_sigma_m**2
-    cov = J @ noise @ J.T
-    cov += np.eye(4) * 1e-12  # the across-ray block is tiny but must stay definite
-    return Belief(np.concatenate([centre, [radius_m]]), cov)
-
-
-def _innovation(belief: Belief, s: Sighting) -> tuple[float, float]:
-    """(NIS, ln det S) of sighting ``s`` against ``belief``."""
-    x = belief.mean
-    y = np.asarray(s.z, dtype=float) - s.model.predict(x)
-    H = s.model.jacobian(x)
-    S = H @ belief.cov @ H.T + s.model.noise_cov
-    S = 0.5 * (S + S.T)
-    try:
-        L = np.linalg.cholesky(S)
-    except np.linalg.LinAlgError:
-        return math.inf, 0.0
-    w = np.linalg.solve(L, y)
-    return float(w @ w), 2.0 * float(np.sum(np.log(np.diag(L))))
-
-
-def assign(
-    beliefs: Sequence[Belief], sightings: Sequence[Sighting], gate_probability: float
-) -> tuple[list[tuple[int, int]], np.ndarray]:
-    """The globally optimal assignment of sightings to beliefs: (belief index, sighting index)
-    pairs minimising the summed negative log-likelihood NIS + ln det S over the pairs whose NIS
-    passes the gate (the χ²₃ quantile of ``gate_probability``); and the (n_beliefs,
-    n_sightings) NIS matrix (inf where the innovation covariance is singular)."""
-    nb, ns = len(beliefs), len(sightings)
-    nis = np.full((nb, ns), math.inf)
-    cost = np.full((nb, ns), math.inf)
-    for i, b in enumerate(beliefs):
-        for j, s in enumerate(sightings):
-            d2, logdet = _innovation(b, s)
-            nis[i, j] = d2
-            cost[i, j] = d2 + logdet
-    if nb == 0 or ns == 0:
-        return [], nis
-    gate = nis_threshold(gate_probability, 3)
-    allowed = nis <= gate
-    if not allowed.any():
-        return [], nis
-    from scipy.optimize import linear_sum_assignment
-
-    finite = cost[allowed]
-    big = float(np.max(finite) - np.min(finite)) * (nb + ns) + 1e6  # never worth taking
-    rows, cols = linear_sum_assignment(np.where(allowed, cost, big))
-    return [(int(i), int(j)) for i, j in zip(rows, cols, strict=True) if allowed[i, j]], nis
 
 
 class Tracker:
@@ -362,14 +261,20 @@ class Tracker:
             events.append(TrackEvent("confirmed", t.id))
 
     def _start(self, s: Sighting, view: int) -> Track | None:
-        """A new track from sighting ``s``, if its fruit lies in the work zone and in range."""
+        """A new track from sighting ``s``, if its fruit may lie in the work zone (the stretch
+        of its ray within 3σ of the range its size gives passes within ``zone_m`` of the zone's
+        centre) and in range."""
         cfg = self.config
         try:
             belief = belief_from_detection(s, *self.radius_prior)
         except EstimationError:
             return None
-        rng = float(np.linalg.norm(belief.centre_m - s.model.p_world_camera))
-        if rng > cfg.max_range_m or np.linalg.norm(belief.centre_m - self.zone_centre_m) > cfg.zone_m:
+        p = s.model.p_world_camera
+        ray = belief.centre_m - p
+        rng = float(np.linalg.norm(ray))
+        sd = 3.0 * rng * self.radius_prior[1] / self.radius_prior[0]
+        along = float(np.clip((self.zone_centre_m - p) @ ray / rng, rng - sd, rng + sd))
+        if rng > cfg.max_range_m or np.linalg.norm(p + along * ray / rng - self.zone_centre_m) > cfg.zone_m:
             return None
         t = Track(self._next_id, belief, view, view, confirmed=cfg.confirm_hits <= 1)
         t.directions.append(_unit(s.model.p_world_camera - belief.centre_m))

@@ -16,6 +16,7 @@ out first, and ``never_detected`` when no view measured a fruit.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -29,11 +30,11 @@ from bve_mj.estimation.tracks import Track, Tracker, ViewTracking
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
-from bve_mj.planning.every_fruit import EveryFruitPlanner, FruitTarget
+from bve_mj.planning.every_fruit import EXPLORE, EveryFruitPlanner, FruitTarget
 from bve_mj.planning.plan import PlanStatus, ViewPlan
 from bve_mj.sim.world import SeesEveryFruit
 
-__all__ = ["FruitState", "FruitsResult", "FruitsView", "claimed", "run_every_fruit"]
+__all__ = ["FruitState", "FruitsResult", "FruitsView", "claimed", "explored_deg", "run_every_fruit"]
 
 
 @dataclass(frozen=True)
@@ -99,6 +100,14 @@ def claimed(track: Track, claims: Claims | None, stop_sigma_m: float, converge_a
     )
 
 
+def explored_deg(directions: list[np.ndarray]) -> float:
+    """The largest angle between two of these unit directions [deg] (0 for fewer than two)."""
+    if len(directions) < 2:
+        return 0.0
+    d = np.array(directions)
+    return math.degrees(math.acos(float(np.clip(np.min(d @ d.T), -1.0, 1.0))))
+
+
 def run_every_fruit(
     world: SeesEveryFruit,
     planner: EveryFruitPlanner,
@@ -108,13 +117,19 @@ def run_every_fruit(
     converge_after: int,
     claims: Claims | None = None,
     on_view: Callable[[FruitsView], None] | None = None,
+    zone: Belief | None = None,
 ) -> FruitsResult:
     """Observe from the start pose, then up to ``steps`` times: plan for every fruit, move,
-    observe, track; stop when every track is localised (see the module docstring).
+    observe, track; stop when every track is localised and the views span
+    ``tracking.explore_span_deg`` around the zone (see the module docstring). While every
+    track is localised (or none exists) but the views do not span it, the view explores the
+    zone (``zone``: a wide belief over it) from a new direction.
 
     A planner that fails holds the camera where it is (event ``planner_failed``)."""
     t0 = time.perf_counter()
     views: list[FruitsView] = []
+    span = tracker.config.explore_span_deg
+    seen_from: list[np.ndarray] = []  # unit directions zone centre → camera of every view
 
     def look(i: int, plan: ViewPlan | None, target: int | None, events: list[Event]) -> None:
         sightings, camera = world.observe_all()
@@ -131,6 +146,11 @@ def run_every_fruit(
         if target is not None and plan is not None and target not in {tid for _, tid in step.assigned}:
             planner.note_failed_view(target, world.p_world_camera, plan.p_world_target)
         info = world.view_info()
+        here = world.p_world_camera
+        seen_from.append(
+            (here - tracker.zone_centre_m) / max(float(np.linalg.norm(here - tracker.zone_centre_m)), 1e-9)
+        )
+        planner.note_explored(here, tracker.zone_centre_m)
         q = world.q_measured
         if q is not None:
             planner.set_configuration(q)
@@ -147,11 +167,16 @@ def run_every_fruit(
 
     look(0, None, None, [])
     outcome: Outcome | None = None
-    for i in range(1, steps + 1):
+
+    def done() -> bool:
         states = views[-1].fruits
-        if states and all(s.localised for s in states):
+        return bool(states) and all(s.localised for s in states) and explored_deg(seen_from) >= span
+
+    for i in range(1, steps + 1):
+        if done():
             outcome = Outcome.CONVERGED
             break
+        states = views[-1].fruits
         targets = [
             FruitTarget(
                 s.id, tracker.track(s.id).belief, s.localised, s.belief.sigma_max_m,
@@ -160,10 +185,8 @@ def run_every_fruit(
             for s in states
         ]  # fmt: skip
         events: list[Event] = []
-        if not targets:  # nothing seen yet: look again from where the camera is
-            hold = ViewPlan(world.p_world_camera, tracker.zone_centre_m, "fallback", False, math.nan)
-            plan, target = hold, None
-            events.append(Event("planner_failed", "no fruit seen yet"))
+        if all(s.localised for s in states):  # every fruit found so far: look for others
+            plan, target = _explore(planner, zone, tracker, world, i, events), EXPLORE
         else:
             t_plan = time.perf_counter()
             try:
@@ -179,11 +202,29 @@ def run_every_fruit(
         world.move_camera(plan)
         look(i, plan, target, events)
     else:
-        states = views[-1].fruits
-        if states and all(s.localised for s in states):
+        if done():
             outcome = Outcome.CONVERGED
     if outcome is None:
         outcome = Outcome.MAX_VIEWS if any(v.detections for v in views) else Outcome.NEVER_DETECTED
     elif outcome == Outcome.CONVERGED and tracker.dropped:
         outcome = Outcome.INCOMPLETE
     return FruitsResult(tuple(views), time.perf_counter() - t0, outcome)
+
+
+def _explore(
+    planner: EveryFruitPlanner,
+    zone: Belief | None,
+    tracker: Tracker,
+    world: SeesEveryFruit,
+    iteration: int,
+    events: list[Event],
+) -> ViewPlan:
+    """A view exploring the zone, or (no zone belief, or the planner fails) the camera held."""
+    t0 = time.perf_counter()
+    if zone is not None:
+        try:
+            return planner.explore(zone, world.p_world_camera, iteration, world.q_measured)
+        except (BveError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+            events.append(Event("planner_failed", f"exploring: {type(exc).__name__}: {exc}"))
+    hold = ViewPlan(world.p_world_camera, tracker.zone_centre_m, "fallback", False, math.nan)
+    return dataclasses.replace(hold, plan_s=time.perf_counter() - t0)

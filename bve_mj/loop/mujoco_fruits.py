@@ -22,7 +22,7 @@ import numpy as np
 
 from bve_mj.config import Settings, settings_to_dict, with_overrides
 from bve_mj.config.experiments import EXPERIMENTS
-from bve_mj.estimation import filter_update
+from bve_mj.estimation import Belief, filter_update
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.tracks import Tracker
 from bve_mj.estimation.view_correlation import new_view_share
@@ -272,9 +272,12 @@ def _run(s: Settings, search: Settings, seed: int) -> FruitsEpisode:
     tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr)
     claims = Claims(noise.centre_bias_cov(fruit.radius_m), INNOVATION_PRIOR_DOF, noise.refusal_scale)
     try:
+        sd = s.tracking.zone_m / 2.0
+        zone_belief = Belief(np.r_[zone, radius_prior[0]], np.diag([sd**2] * 3 + [radius_prior[1] ** 2]))
         result = run_every_fruit(
-            world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims
-        )
+            world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims,
+            zone=zone_belief,
+        )  # fmt: skip
         visits = None
         if s.episode.approach and result.final:
             visits = harvest(world, result.final, s, info)

@@ -36,7 +36,10 @@ from bve_mj.planning.plan import (
     ViewPlan,
 )
 
-__all__ = ["CandidateScore", "EveryFruitPlanner", "FruitTarget", "information_gain"]
+__all__ = ["EXPLORE", "CandidateScore", "EveryFruitPlanner", "FruitTarget", "information_gain"]
+
+EXPLORE = -1
+"""The planner key (and ``planned_for``) of the views that explore the work zone."""
 
 
 @dataclass(frozen=True)
@@ -120,6 +123,31 @@ class EveryFruitPlanner:
         if isinstance(p, LearnsFromFusedViews):
             p.note_fused_view(p_world_camera, p_world_target)
 
+    def explore(
+        self, zone: Belief, p_world_camera: np.ndarray, iteration: int, q: np.ndarray | None = None
+    ) -> ViewPlan:
+        """A view of the work zone from a new direction: the BVE for the zone (a wide belief
+        around its centre) with every view taken so far noted as a failed view of it
+        (:meth:`note_explored`), so it looks where no view has.
+
+        Raises:
+            BveError: when the planner finds no viewpoint."""
+        planner = self.planner(EXPLORE)
+        if q is not None and isinstance(planner, SyncsToEncoders):
+            planner.set_configuration(q)
+        plan = planner.plan(zone, p_world_camera, iteration)
+        if not (np.all(np.isfinite(plan.p_world_camera)) and np.all(np.isfinite(plan.p_world_target))):
+            raise BveError("the exploration view is not finite")
+        if q is not None:
+            self.set_configuration(q)
+        return plan
+
+    def note_explored(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        """A view of the zone was taken from ``p_world_camera``: exploration looks elsewhere."""
+        p = self.planner(EXPLORE)
+        if isinstance(p, LearnsFromFailedViews):
+            p.note_failed_view(p_world_camera, p_world_target)
+
     def plan(
         self,
         fruits: Sequence[FruitTarget],
@@ -186,4 +214,3 @@ class EveryFruitPlanner:
             plan.p_world_camera, plan.p_world_target, plan.status, plan.feasible, plan.max_violation,
             plan.loss, plan.iterations, plan_s, plan.q,
         ), fruit  # fmt: skip
-
