@@ -71,10 +71,12 @@ def run_every_fruit_cli(settings: Settings, seed: int, json_path: Path | None, *
         h = doc["harvest"]
         print(f"harvest order ({h['rule']}): {h['order']}")
         for visit in h["visits"]:
+            c = visit["clearance_m"]
+            clear = f">= {1e3 * c:.0f}" if c >= 0.05 else f"{1e3 * c:.1f}"
             print(
                 f"  track {visit['track']}: {'reached' if visit['reached'] else 'not reached'}, camera "
-                f"{1e3 * visit['true_distance_m']:.0f} mm from the fruit, least clearance "
-                f"{1e3 * visit['clearance_m']:.1f} mm" + (f" ({visit['reason']})" if visit["reason"] else "")
+                f"{1e3 * visit['distance_m']:.0f} mm from its estimate, least clearance of the arm to "
+                f"any fruit {clear} mm" + (f" ({visit['reason']})" if visit["reason"] else "")
             )
     if json_path is not None:
         write_json_atomic(json_path, doc)

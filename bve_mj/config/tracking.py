@@ -60,7 +60,7 @@ class TrackingConfig:
         default=2, metadata=_why("a track is confirmed after this many assigned detections")
     )
     delete_misses: int = field(
-        default=2,
+        default=3,
         metadata=_why(
             "a track never confirmed is deleted after this many views planned to see it missed it, "
             "or three times as many views that should have seen it (in the image, its outline not "

@@ -23,10 +23,12 @@ centre and radius), and per view:
    a poor view is, from a good one);
 5. **merges** duplicates: two tracks that are one fruit. Each track's belief is its own
    detections and the radius prior, so their information adds, less the radius prior's
-   counted twice; they are merged when the fused belief agrees with both (χ² of the
-   difference of their states, ``merge_probability``) and, for two confirmed tracks, their
-   centres lie closer than a fruit's radius. Two tentative tracks of one fruit are two rays
-   that cross at it (each long along its ray), so for them agreement alone decides.
+   counted twice; they are merged when they agree (χ² of the difference of their states,
+   ``merge_probability``) and, for two confirmed tracks, their centres lie closer than a
+   fruit's radius. Two tentative tracks of one fruit are two rays that cross at it (each
+   long along its ray), so for them agreement alone decides. Two tracks whose centres lie
+   closer than a fruit's radius are one fruit whatever their beliefs say (two fruit cannot
+   overlap): when they disagree, the one with more detections stays as it is.
 
 A fruit hidden behind a nearer one is predicted hidden and not counted as missed.
 """
@@ -291,15 +293,14 @@ class Tracker:
             merged = False
             for a, b in _pairs(self.tracks):
                 fused = self._fused(a.belief, b.belief)
-                if fused is None:
-                    continue
                 d = a.belief.mean - b.belief.mean
                 chi2 = float(d @ np.linalg.solve(a.belief.cov + b.belief.cov, d))
                 both = a.confirmed and b.confirmed
                 close = float(np.linalg.norm(a.centre_m - b.centre_m)) < 0.5 * (a.radius_m + b.radius_m)
-                if chi2 <= limit and (close or not both):
+                agree = fused is not None and chi2 <= limit
+                if (agree and (close or not both)) or close:
                     keep, drop = (a, b) if (a.hits, -a.id) >= (b.hits, -b.id) else (b, a)
-                    keep.belief = fused
+                    keep.belief = fused if fused is not None and agree else keep.belief
                     keep.hits += drop.hits
                     keep.confirmed = keep.confirmed or drop.confirmed or keep.hits >= self.config.confirm_hits
                     keep.innovations += drop.innovations
