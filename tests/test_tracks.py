@@ -16,6 +16,7 @@ from bve_mj.geometry import camera_rotation
 F, W, H = 466.0, 640, 480
 SIGMA_PX = 0.4
 UPDATE = filter_update("ekf", 10)
+CONFIRM = TrackingConfig().confirm_hits
 
 
 def _z(centre, radius, p, R):
@@ -120,7 +121,7 @@ def test_the_assignment_is_the_brute_force_optimum(rng):
 def _run_tracker(n_fruit, seed, views=8, drop_p=0.2, false_views=(2, 5)):
     rng = np.random.default_rng(seed)
     centres, radii = _truss(n_fruit, rng)
-    cfg = TrackingConfig(fruits="all", zone_m=0.25)
+    cfg = TrackingConfig(fruits="all", zone_m=0.25, confirm_hits=CONFIRM)
     tracker = Tracker(cfg, centres.mean(axis=0), (0.03, 0.003), UPDATE, _visible())
     history: dict[int, set[int]] = {}  # fruit -> track ids ever assigned its detections
     false_ids: list[int] = []
@@ -171,10 +172,10 @@ def test_every_fruit_of_a_truss_is_tracked_without_swaps_and_a_false_detection_i
         for k, ids in history.items():
             alive = [i for i in ids if any(t.id == i for t in tracker.tracks)]
             assert len(alive) <= 1, f"seed {seed}: fruit {k}'s detections feed tracks {sorted(ids)}"
-        # fruit seen at least twice are confirmed
+        # fruit seen at least confirm_hits times are confirmed
         for k, ids in history.items():
             hits = sum(t.hits for t in tracker.tracks if t.id in ids)
-            if hits >= 2:
+            if hits >= CONFIRM:
                 assert k in matched, f"seed {seed}: fruit {k} seen {hits} times has no confirmed track"
         # the false detections: never confirmed
         assert false_ids, "the false detections were never seen by the tracker"
@@ -214,7 +215,7 @@ def test_two_sightings_of_one_fruit_from_far_apart_views_make_one_track():
     """Two tentative tracks of one fruit cross at it: merged into one (confirmed) track whose
     belief is their information added (the radius prior once)."""
     fruit, r = np.array([0.45, 0.02, 0.3]), 0.027
-    cfg = TrackingConfig(fruits="all", zone_m=0.2, gate_probability=1e-6)  # gate shut: no assignment
+    cfg = TrackingConfig(fruits="all", zone_m=0.2, gate_probability=1e-6, confirm_hits=2)  # gate shut
     tracker = Tracker(cfg, fruit, (0.03, 0.003), UPDATE, _visible())
     (p0, R0), (p1, R1) = _views(5)[0], _views(5)[4]
     s0 = Sighting(_z(fruit, r, p0, R0), _model(p0, R0))

@@ -20,8 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from bve_mj.campaigns.executors import local_batches
-from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario
+from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario, run_rows
 from bve_mj.campaigns.spec import episode_seed
 from bve_mj.config import Settings, with_overrides
 from bve_mj.errors import BveError, ConfigError
@@ -168,23 +167,7 @@ def run_fruit_suite(
         sc.name: with_overrides(sc.settings("camera", None, "centre_radius"), tracking={"fruits": "all"})
         for sc in scenarios
     }
-    chunk = max(1, min(5, seeds // max(1, 2 * workers)))
-    tasks: list[_Task] = [
-        (sc.name, settings[sc.name], seed, tuple(range(start, min(seeds, start + chunk))))
-        for sc in scenarios
-        for start in range(0, seeds, chunk)
-    ]
-    collected: dict[str, list[dict[str, Any]]] = {sc.name: [] for sc in scenarios}
-    total, done = len(scenarios) * seeds, 0
-    if progress is not None:
-        progress(0, total)
-    for batch in local_batches(_run_task, tasks, min(workers, len(tasks))):
-        for row in batch:
-            collected[row["scenario"]].append(row)
-        done += len(batch)
-        if progress is not None:
-            progress(done, total)
-    rows = {n: tuple(sorted(r, key=lambda x: x["run"])) for n, r in collected.items()}
+    rows = run_rows(_run_task, scenarios, settings, seed, seeds, workers, progress)
     return FruitSuiteResult(tuple(scenarios), rows, seed, seeds, time.perf_counter() - t0)
 
 

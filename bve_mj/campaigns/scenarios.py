@@ -40,6 +40,7 @@ __all__ = [
     "SuiteResult",
     "format_suite",
     "load_suite",
+    "run_rows",
     "run_suite",
     "suite_dir",
     "suite_json",
@@ -257,6 +258,21 @@ def run_suite(
         raise ConfigError("measurement", measurement, "camera or range")
     t0 = time.perf_counter()
     settings = {sc.name: sc.settings(measurement, filter_kind, state) for sc in scenarios}
+    rows = run_rows(_run_task, scenarios, settings, seed, seeds, workers, progress)
+    return SuiteResult(tuple(scenarios), settings, rows, seed, seeds, time.perf_counter() - t0)
+
+
+def run_rows(
+    run_task: Callable[[Task], list[dict[str, Any]]],
+    scenarios: Sequence[Scenario],
+    settings: dict[str, Settings],
+    seed: int,
+    seeds: int,
+    workers: int,
+    progress: Callable[[int, int], None] | None,
+) -> dict[str, tuple[dict[str, Any], ...]]:
+    """Every scenario's ``seeds`` episodes, in chunks of runs over ``workers`` spawned
+    processes (``run_task`` runs one chunk): each scenario's rows in run order."""
     chunk = max(1, min(5, seeds // max(1, 2 * workers)))
     tasks: list[Task] = [
         (sc.name, settings[sc.name], seed, tuple(range(start, min(seeds, start + chunk))))
@@ -267,14 +283,13 @@ def run_suite(
     total, done = len(scenarios) * seeds, 0
     if progress is not None:
         progress(0, total)
-    for batch in local_batches(_run_task, tasks, min(workers, len(tasks))):
+    for batch in local_batches(run_task, tasks, min(workers, len(tasks))):
         for row in batch:
             collected[row["scenario"]].append(row)
         done += len(batch)
         if progress is not None:
             progress(done, total)
-    rows = {n: tuple(sorted(r, key=lambda x: x["run"])) for n, r in collected.items()}
-    return SuiteResult(tuple(scenarios), settings, rows, seed, seeds, time.perf_counter() - t0)
+    return {n: tuple(sorted(r, key=lambda x: x["run"])) for n, r in collected.items()}
 
 
 def format_suite(summaries: dict[str, dict[str, Any]], markdown: bool = False) -> list[str]:

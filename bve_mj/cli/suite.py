@@ -75,12 +75,7 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
     if json_path is not None:
         write_json_atomic(json_path, suite_json(result))
         print(f"wrote {json_path}")
-    if result.crashed:
-        print(f"bve-mj: {len(result.crashed)} episodes crashed:", file=sys.stderr)
-        for line in result.crashed[:5]:
-            print(f"  {line}", file=sys.stderr)
-        return EXIT_FAILURE
-    return EXIT_OK
+    return _exit_status(result.crashed)
 
 
 def _every_fruit(
@@ -101,9 +96,14 @@ def _every_fruit(
         doc = {"seed": seed, "seeds": seeds, "wall_s": result.wall_s, "scenarios": summaries}
         write_json_atomic(json_path, suite_json_clean(doc))
         print(f"wrote {json_path}")
-    if result.crashed:
-        print(f"bve-mj: {len(result.crashed)} episodes crashed:", file=sys.stderr)
-        for line in result.crashed[:5]:
+    return _exit_status(result.crashed)
+
+
+def _exit_status(crashed: list[str]) -> int:
+    """1 (and the first crashes on stderr) when episodes crashed, else 0."""
+    if crashed:
+        print(f"bve-mj: {len(crashed)} episodes crashed:", file=sys.stderr)
+        for line in crashed[:5]:
             print(f"  {line}", file=sys.stderr)
         return EXIT_FAILURE
     return EXIT_OK

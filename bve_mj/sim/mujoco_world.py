@@ -208,12 +208,21 @@ class MujocoWorld:
         timings.ik_s = t1 - t0
         timings.control_s = time.perf_counter() - t1 - timings.record_s
 
-    def observe(self, belief: Belief | None = None) -> Observation | None:
+    def _capture(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """Render the eye-in-hand image (with the sensor's noise), then read the encoders:
+        (image, camera position, camera rotation as the encoders report them, the time the
+        capture began [s, perf_counter]); the render time is recorded."""
         t0 = time.perf_counter()
         image = noisy_image(self.renderer.render(self.data, CAMERA_NAME), self.settings.sensor, self._rng)
-        t1 = time.perf_counter()
+        self.last.timings.render_s = time.perf_counter() - t0
         q_enc, p, R = self._measured_pose()
         self.last.q, self.last.q_encoders = self.q, q_enc
+        if self._keep_images:
+            self.last.image = image
+        return image, p, R, time.perf_counter()
+
+    def observe(self, belief: Belief | None = None) -> Observation | None:
+        image, p, R, t1 = self._capture()
         s = self.settings
         if belief is not None:  # the estimate picks its fruit among those in view, in 3-D
             b = belief.position
@@ -227,10 +236,7 @@ class MujocoWorld:
             predicted = self.intrinsics.project(ahead) if ahead[0] > 1e-3 else None
             det = detect(image, self.intrinsics, self.fruit_prior, self.measurement, s.detector, predicted)
         self.last.detection = det
-        self.last.timings.render_s = t1 - t0
         self.last.timings.detect_s = time.perf_counter() - t1
-        if self._keep_images:
-            self.last.image = image
         if not isinstance(det, Detection):
             return None
         if self.noise is not None:  # the radius in the state: what the detector measures
@@ -254,21 +260,14 @@ class MujocoWorld:
 
         if self.noise is None:
             raise ValueError("every fruit is measured with the radius in the state (centre_radius)")
-        t0 = time.perf_counter()
-        image = noisy_image(self.renderer.render(self.data, CAMERA_NAME), self.settings.sensor, self._rng)
-        t1 = time.perf_counter()
-        q_enc, p, R = self._measured_pose()
-        self.last.q, self.last.q_encoders = self.q, q_enc
+        image, p, R, t1 = self._capture()
         s = self.settings
         found = detect_all(
             image, self.intrinsics, self.fruit_prior, self.measurement, s.detector,
             up_camera=R.T[:, 2], max_range_m=s.tracking.max_range_m,
         )  # fmt: skip
         self.last.every = found
-        self.last.timings.render_s = t1 - t0
         self.last.timings.detect_s = time.perf_counter() - t1
-        if self._keep_images:
-            self.last.image = image
         sightings = []
         for det in found.detections:
             z, cov = measure(det, self.noise, s.fruit.shape_index, self.intrinsics.focal_px)
