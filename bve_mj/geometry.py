@@ -24,6 +24,7 @@ __all__ = [
     "project_point",
     "ray_frame",
     "skew",
+    "unit",
 ]
 
 VERTICAL_EPS = 1e-9
@@ -172,3 +173,9 @@ def ray_frame(axis: np.ndarray) -> np.ndarray:
     n = float(np.linalg.norm(e1))
     e1 = e1 / n if n > 1e-9 else np.array([0.0, 1.0, 0.0])
     return np.column_stack((axis, e1, np.cross(axis, e1)))
+
+
+def unit(v: np.ndarray, fallback: tuple[float, float, float] = (1.0, 0.0, 0.0)) -> np.ndarray:
+    """``v`` / ‖v‖, or ``fallback`` for a vector of (near) zero length."""
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-12 else np.array(fallback, dtype=float)

@@ -16,11 +16,12 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
 
-from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario, run_rows
+from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario, crashed_rows, run_chunk, run_rows
 from bve_mj.campaigns.spec import episode_seed
 from bve_mj.config import Settings, with_overrides
 from bve_mj.errors import BveError, ConfigError
@@ -29,8 +30,6 @@ __all__ = ["FruitSuiteResult", "format_fruit_suite", "run_fruit_suite"]
 
 LOCALISED_MM = 5.0
 """A ripe fruit counts as localised when a localised track lies within this of it [mm]."""
-
-_Task = tuple[str, Settings, int, tuple[int, ...]]
 
 
 def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, Any]:
@@ -76,21 +75,6 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
         "tracks_max": max((len(v.fruits) for v in views), default=0),
         "wall_s": ep.result.wall_s,
     }
-
-
-def _run_task(task: _Task) -> list[dict[str, Any]]:
-    from bve_mj.threads import one_blas_thread
-
-    name, settings, seed, runs = task
-    with one_blas_thread():
-        rows = []
-        for run in runs:
-            try:
-                rows.append(_run_one(name, settings, seed, run))
-            except Exception as exc:  # a bug: one line, kept out of the metrics, exit 1
-                rows.append({"scenario": name, "run": run, "outcome": "crashed",
-                             "message": f"{type(exc).__name__}: {exc}"})  # fmt: skip
-        return rows
 
 
 @dataclass(frozen=True)
@@ -141,12 +125,7 @@ class FruitSuiteResult:
 
     @property
     def crashed(self) -> list[str]:
-        return [
-            f"{r['scenario']} run {r['run']}: {r['message']}"
-            for rows in self.rows.values()
-            for r in rows
-            if r["outcome"] == "crashed"
-        ]
+        return crashed_rows(self.rows)
 
 
 def run_fruit_suite(
@@ -167,7 +146,7 @@ def run_fruit_suite(
         sc.name: with_overrides(sc.settings("camera", None, "centre_radius"), tracking={"fruits": "all"})
         for sc in scenarios
     }
-    rows = run_rows(_run_task, scenarios, settings, seed, seeds, workers, progress)
+    rows = run_rows(partial(run_chunk, _run_one), scenarios, settings, seed, seeds, workers, progress)
     return FruitSuiteResult(tuple(scenarios), rows, seed, seeds, time.perf_counter() - t0)
 
 

@@ -22,6 +22,7 @@ import sysconfig
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -38,8 +39,10 @@ __all__ = [
     "SILENT_NEES",
     "Scenario",
     "SuiteResult",
+    "crashed_rows",
     "format_suite",
     "load_suite",
+    "run_chunk",
     "run_rows",
     "run_suite",
     "suite_dir",
@@ -162,19 +165,34 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
     }
 
 
-def _run_task(task: Task) -> list[dict[str, Any]]:
+def run_chunk(
+    run_one: Callable[[str, Settings, int, int], dict[str, Any]], task: Task
+) -> list[dict[str, Any]]:
+    """``run_one(name, settings, seed, run)`` for every run of the task, with one BLAS thread
+    (results identical in any process); an exception is a bug: a ``crashed`` row with one line,
+    kept out of the metrics (exit 1)."""
     from bve_mj.threads import one_blas_thread
 
     name, settings, seed, runs = task
-    with one_blas_thread():  # results identical in any process
+    with one_blas_thread():
         rows = []
         for run in runs:
             try:
-                rows.append(_run_one(name, settings, seed, run))
-            except Exception as exc:  # a bug: one line, kept out of the metrics, exit 1
+                rows.append(run_one(name, settings, seed, run))
+            except Exception as exc:
                 rows.append({"scenario": name, "run": run, "outcome": "crashed",
                              "message": f"{type(exc).__name__}: {exc}"})  # fmt: skip
         return rows
+
+
+def crashed_rows(rows: dict[str, tuple[dict[str, Any], ...]]) -> list[str]:
+    """One line per crashed episode of these scenario rows."""
+    return [
+        f"{r['scenario']} run {r['run']}: {r['message']}"
+        for scenario in rows.values()
+        for r in scenario
+        if r["outcome"] == "crashed"
+    ]
 
 
 @dataclass(frozen=True)
@@ -227,12 +245,7 @@ class SuiteResult:
 
     @property
     def crashed(self) -> list[str]:
-        return [
-            f"{r['scenario']} run {r['run']}: {r['message']}"
-            for rows in self.rows.values()
-            for r in rows
-            if r["outcome"] == "crashed"
-        ]
+        return crashed_rows(self.rows)
 
 
 def run_suite(
@@ -258,7 +271,7 @@ def run_suite(
         raise ConfigError("measurement", measurement, "camera or range")
     t0 = time.perf_counter()
     settings = {sc.name: sc.settings(measurement, filter_kind, state) for sc in scenarios}
-    rows = run_rows(_run_task, scenarios, settings, seed, seeds, workers, progress)
+    rows = run_rows(partial(run_chunk, _run_one), scenarios, settings, seed, seeds, workers, progress)
     return SuiteResult(tuple(scenarios), settings, rows, seed, seeds, time.perf_counter() - t0)
 
 

@@ -48,6 +48,7 @@ from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.ekf import UpdateResult, nis_threshold
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
+from bve_mj.geometry import unit
 
 __all__ = ["Sighting", "Track", "TrackEvent", "Tracker", "ViewTracking", "assign", "belief_from_detection"]
 
@@ -245,7 +246,7 @@ class Tracker:
 
     def _fuse(self, t: Track, s: Sighting, view: int, events: list[TrackEvent]) -> None:
         model = s.model
-        direction = _unit(model.p_world_camera - t.centre_m)
+        direction = unit(model.p_world_camera - t.centre_m)
         if self._correlation is not None and t.directions:
             taken = np.array(t.directions)
             centre_share = new_view_share(self._correlation[0], taken, direction)[0]
@@ -279,7 +280,7 @@ class Tracker:
         if rng > cfg.max_range_m or np.linalg.norm(p + along * ray / rng - self.zone_centre_m) > cfg.zone_m:
             return None
         t = Track(self._next_id, belief, view, view, confirmed=cfg.confirm_hits <= 1)
-        t.directions.append(_unit(s.model.p_world_camera - belief.centre_m))
+        t.directions.append(unit(s.model.p_world_camera - belief.centre_m))
         self._next_id += 1
         self.tracks.append(t)
         return t
@@ -337,8 +338,3 @@ class Tracker:
 
 def _pairs(tracks: list[Track]) -> list[tuple[Track, Track]]:
     return [(a, b) for i, a in enumerate(tracks) for b in tracks[i + 1 :]]
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = float(np.linalg.norm(v))
-    return v / n if n > 1e-12 else np.array([1.0, 0.0, 0.0])

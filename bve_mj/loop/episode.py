@@ -15,6 +15,7 @@ from bve_mj.config import FilterConfig
 from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation import Belief, UpdateResult, filter_update, predict
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
+from bve_mj.geometry import unit
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.events import Event, EventKind
 from bve_mj.loop.outcomes import Outcome
@@ -116,11 +117,6 @@ class StopRules:
         return Outcome.STALLED if stalled else None
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = float(np.linalg.norm(v))
-    return v / n if n > 1e-12 else np.array([1.0, 0.0, 0.0])
-
-
 def _accepted_since_reset(views: Sequence[ViewRecord]) -> int:
     """Accepted measurements since the last belief reset (the reset's own view counts)."""
     start = max((k for k, v in enumerate(views) if v.has("belief_reset")), default=0)
@@ -204,7 +200,7 @@ def run_episode(
         looked_at = belief.centre_m
         obs = world.observe(belief)
         measured, accepted, nis = obs is not None, False, float("nan")
-        direction = _unit(world.p_world_camera - belief.centre_m)
+        direction = unit(world.p_world_camera - belief.centre_m)
         if obs is not None and correlation is not None and fused:
             taken = np.array(fused)
             centre_share = new_view_share(correlation[0], taken, direction)[0]

@@ -28,7 +28,7 @@ import numpy as np
 
 from bve_mj.config import Settings
 from bve_mj.estimation.visibility import visible_arc_deg
-from bve_mj.geometry import camera_rotation
+from bve_mj.geometry import camera_rotation, unit
 from bve_mj.loop.every_fruit import FruitState
 from bve_mj.planning.plan import ViewPlan
 from bve_mj.robot.ik import IkOptions, look_at_ik
@@ -211,5 +211,4 @@ def _turn(v: np.ndarray, yaw: float, el: float) -> np.ndarray:
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    n = float(np.linalg.norm(v))
-    return v / n if n > 1e-12 else np.array([-1.0, 0.0, 0.0])
+    return unit(v, (-1.0, 0.0, 0.0))  # no direction: the robot's side of the row
