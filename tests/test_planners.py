@@ -8,7 +8,14 @@ import pytest
 from bve_mj.config import Settings
 from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.estimation import Belief
-from bve_mj.planning import BvePlanner, CirclePlanner, RandomPlanner, StepLimit, build_constraints
+from bve_mj.planning import (
+    BvePlanner,
+    CirclePlanner,
+    FixedViewsPlanner,
+    RandomPlanner,
+    StepLimit,
+    build_constraints,
+)
 
 TOL = 1e-6
 CASES = 200
@@ -97,7 +104,7 @@ def test_optimisers_agree_on_the_optimum():
     assert total >= 10 and close >= 0.9 * total
 
 
-@pytest.mark.parametrize("kind", ["random", "circle"])
+@pytest.mark.parametrize("kind", ["random", "circle", "fixed"])
 def test_baselines_satisfy_every_constraint(kind):
     rng = np.random.default_rng(99)
     settings = Settings()
@@ -106,10 +113,36 @@ def test_baselines_satisfy_every_constraint(kind):
         belief, camera, experiment = random_case(rng)
         if kind == "random":
             planner = RandomPlanner(settings, experiment.constraints, np.random.default_rng(1))
-        else:
+        elif kind == "circle":
             planner = CirclePlanner(settings, experiment.constraints)
+        else:
+            planner = FixedViewsPlanner(settings, experiment.constraints)
         feasible += check_plan(planner.plan(belief, camera, 1), settings, experiment, belief, camera)
     assert feasible >= CASES // 3
+
+
+def test_the_fixed_views_are_three_collinear_points_visited_in_turn_within_the_step_limit():
+    """Unconstrained but for the step: left, (through the centre) right, centre, left again;
+    the line horizontal and across the view direction, the views a step apart."""
+    settings = Settings()
+    k = np.array([0.5, 0.1, 0.4])
+    start = k + np.array([-0.3, 0.0, 0.05])
+    planner = FixedViewsPlanner(settings, ())
+    left, right, centre = planner.views(k, start)
+    assert np.allclose(centre, start)
+    assert np.allclose(left - centre, centre - right)  # collinear, symmetric
+    assert np.isclose(np.linalg.norm(left - centre), settings.step_m)
+    assert abs((left - centre)[2]) < 1e-12 and abs((left - centre) @ (k - start)) < 1e-12
+    belief = Belief(k, 1e-4 * np.eye(3))
+    camera, path = start, []
+    for i in range(1, 7):
+        plan = planner.plan(belief, camera, i)
+        assert np.linalg.norm(plan.p_world_camera - camera) <= settings.step_m + 1e-6
+        assert np.allclose(plan.p_world_target, k)
+        camera = plan.p_world_camera
+        path.append(camera)
+    expected = [left, centre, right, centre, left, centre]  # right is two steps from left
+    assert all(np.allclose(a, b, atol=2e-3) for a, b in zip(path, expected, strict=True)), path
 
 
 def test_consistent_range_planner_looks_along_the_largest_uncertainty():

@@ -17,16 +17,16 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
-from typing import Any
+from typing import Any, get_args
 
 import numpy as np
 
 from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario, crashed_rows, run_chunk, run_rows
 from bve_mj.campaigns.spec import episode_seed
-from bve_mj.config import Settings, with_overrides
+from bve_mj.config import PlannerKind, Settings, with_overrides
 from bve_mj.errors import BveError, ConfigError
 
-__all__ = ["FruitSuiteResult", "format_fruit_suite", "run_fruit_suite"]
+__all__ = ["FruitSuiteResult", "compare_fruit_planners", "format_fruit_suite", "run_fruit_suite"]
 
 LOCALISED_MM = 5.0
 """A ripe fruit counts as localised when a localised track lies within this of it [mm]."""
@@ -66,6 +66,7 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
         "episode_seed": ep_seed,
         "outcome": ep.result.outcome,
         "views": len(views),
+        "views_to_truss": ep.views_to_localise(LOCALISED_MM),
         "ripe": len(matches),
         "fruits": fruits,
         "false_tracks": len(false),
@@ -111,6 +112,10 @@ class FruitSuiteResult:
             else math.nan,
             "false_tracks": int(sum(r["false_tracks"] for r in ok)),
             "views_median": float(np.median([r["views"] for r in ok])) if ok else math.nan,
+            "truss_pct": 100.0 * float(np.mean([r["views_to_truss"] is not None for r in ok]))
+            if ok
+            else math.nan,
+            "views_to_truss_median": _median_views(ok),
             "error_mm_median": float(np.median([f["error_mm"] for f in tracked])) if tracked else math.nan,
             "radius_error_mm_median": float(np.median(r_err)),
             "nees_mean": float(np.mean(nees)),
@@ -134,16 +139,23 @@ def run_fruit_suite(
     seeds: int = 20,
     seed: int = 0,
     workers: int = 1,
+    planner: PlannerKind | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> FruitSuiteResult:
     """Run ``seeds`` every-fruit episodes of every scenario (camera measurement, the radius in
-    the state: the files' measurement and state are overridden)."""
+    the state: the files' measurement and state are overridden; ``planner``: the planner for
+    every scenario, default each file's)."""
     for name, value, lo in (("seeds", seeds, 1), ("seed", seed, 0), ("workers", workers, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < lo:
             raise ConfigError(name, value, f"an integer >= {lo}")
+    if planner is not None and planner not in get_args(PlannerKind):
+        raise ConfigError("planner", planner, f"one of {', '.join(get_args(PlannerKind))}")
     t0 = time.perf_counter()
+    chosen: dict[str, dict[str, object]] = {} if planner is None else {"planner": {"kind": planner}}
     settings = {
-        sc.name: with_overrides(sc.settings("camera", None, "centre_radius"), tracking={"fruits": "all"})
+        sc.name: with_overrides(
+            sc.settings("camera", None, "centre_radius"), tracking={"fruits": "all"}, **chosen
+        )
         for sc in scenarios
     }
     rows = run_rows(partial(run_chunk, _run_one), scenarios, settings, seed, seeds, workers, progress)
@@ -191,3 +203,63 @@ def format_fruit_suite(summaries: dict[str, dict[str, Any]]) -> list[str]:
         "(every candidate's BVE with the arm), assoc: association and update per view"
     )
     return [head, "-" * len(head), *(fmt.format(*r) for r in rows), note]
+
+
+def _views_or_inf(row: dict[str, Any]) -> float:
+    v = row.get("views_to_truss")
+    return math.inf if v is None else float(v)
+
+
+def _median_views(rows: Sequence[dict[str, Any]]) -> float:
+    """The median views to the whole truss localised, an episode that never got there counted
+    as infinitely many (the median is ∞ when half of them never did)."""
+    return float(np.median([_views_or_inf(r) for r in rows])) if rows else math.nan
+
+
+def compare_fruit_planners(results: dict[str, FruitSuiteResult], reference: str = "bve") -> list[str]:
+    """The paired comparison of planners on the same seeds (the same scenes): per scenario and
+    planner, the episodes with every ripe fruit localised within 5 mm, the median views until
+    then (∞: half never), the ripe fruit localised, and against ``reference`` per paired
+    seed: fewer / as many / more views (an episode that never localised the truss counts as
+    more than any that did; two that never did, as many), with the one-sided sign test's p
+    (ties dropped) that the reference needs fewer."""
+    from scipy.stats import binomtest
+
+    if reference not in results:
+        raise ConfigError("planners", ",".join(results), f"a list that includes {reference}")
+    ref = results[reference]
+    head = (
+        f"{'scenario':<16} {'planner':<7} {'truss%':>6} {'views':>6} {'loc%':>6}  "
+        f"{reference} fewer/same/more  sign-test p"
+    )
+    lines = [head, "-" * len(head)]
+    for sc in ref.scenarios:
+        base = {r["run"]: r for r in ref.rows[sc.name] if r["outcome"] not in ("failed", "crashed")}
+        for name, res in results.items():
+            s = res.summary(sc.name)
+            views = s["views_to_truss_median"]
+            text = f"{sc.name:<16} {name:<7} {s['truss_pct']:6.0f} {views:6.1f} {s['localised_pct']:6.1f}"
+            if name == reference:
+                lines.append(text)
+                continue
+            fewer = same = more = 0
+            for r in res.rows[sc.name]:
+                b = base.get(r["run"])
+                if b is None or r["outcome"] in ("failed", "crashed"):
+                    continue
+                a, o = _views_or_inf(b), _views_or_inf(r)
+                fewer += a < o
+                same += a == o
+                more += a > o
+            p = (
+                binomtest(fewer, fewer + more, 0.5, alternative="greater").pvalue
+                if fewer + more
+                else math.nan
+            )
+            lines.append(f"{text}  {fewer:>6}/{same}/{more:<6}  {p:.3g}")
+    lines.append(
+        "truss%: episodes with every ripe fruit of the zone localised within "
+        f"{LOCALISED_MM:g} mm; views: median views until then (inf: half never); loc%: ripe fruit "
+        f"localised; paired by seed against {reference}"
+    )
+    return lines

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast, get_args
 
 from bve_mj.cli.args import EXIT_FAILURE, EXIT_OK, check_output_path, int_arg, progress_printer
 from bve_mj.reporting.atomic import write_json_atomic
@@ -14,7 +14,7 @@ from bve_mj.reporting.atomic import write_json_atomic
 __all__ = ["cmd_calibrate", "cmd_scenarios"]
 
 if TYPE_CHECKING:
-    pass
+    from bve_mj.campaigns.fruit_suite import FruitSuiteResult
 
 
 def cmd_scenarios(args: argparse.Namespace) -> int:
@@ -38,6 +38,8 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
     if args.fruits is not None and args.fruits not in ("target", "all"):
         raise ConfigError("fruits", args.fruits, "one of target, all")
     suite = load_suite(args.dir, args.only.split(",") if args.only is not None else None)
+    if args.planners is not None and args.fruits != "all":
+        raise ConfigError("planners", args.planners, "only with --fruits all")
     if args.fruits == "all":
         for name in ("measurement", "filter", "state", "plot"):
             if getattr(args, name) is not None:
@@ -82,21 +84,47 @@ def _every_fruit(
     args: argparse.Namespace, suite: list[Any], seeds: int, seed: int, workers: int, json_path: Path | None
 ) -> int:
     """``bve-mj scenarios --fruits all``: every ripe fruit of each scene."""
-    from bve_mj.campaigns.fruit_suite import format_fruit_suite, run_fruit_suite
+    from bve_mj.campaigns.fruit_suite import compare_fruit_planners, format_fruit_suite, run_fruit_suite
     from bve_mj.campaigns.scenarios import suite_json_clean
+    from bve_mj.config import PlannerKind
+    from bve_mj.errors import ConfigError
 
+    allowed = get_args(PlannerKind)
+    planners: list[PlannerKind | None] = [None]
+    if args.planners is not None:
+        names = [p.strip() for p in str(args.planners).split(",")]
+        bad = [p for p in names if p not in allowed] or ([] if len(set(names)) == len(names) else names)
+        if bad or not names:
+            raise ConfigError("planners", args.planners, f"distinct names from {', '.join(allowed)}")
+        planners = [cast("PlannerKind", p) for p in names]
     print(f"bve-mj scenarios --fruits all: {len(suite)} scenarios x {seeds} seeds (base seed {seed})")
     show = not args.quiet and sys.stderr.isatty()
-    result = run_fruit_suite(suite, seeds=seeds, seed=seed, workers=workers, progress=progress_printer(show))
-    summaries = {sc.name: result.summary(sc.name) for sc in result.scenarios}
-    for line in format_fruit_suite(summaries):
-        print(line)
-    print(f"wall time {result.wall_s:.1f} s")
+    results: dict[str, FruitSuiteResult] = {}
+    for planner in planners:
+        if planner is not None:
+            print(f"planner {planner}:")
+        result = run_fruit_suite(
+            suite, seeds=seeds, seed=seed, workers=workers, planner=planner, progress=progress_printer(show)
+        )
+        results[planner or "file"] = result
+        for line in format_fruit_suite({sc.name: result.summary(sc.name) for sc in result.scenarios}):
+            print(line)
+        print(f"wall time {result.wall_s:.1f} s")
+    if len(results) > 1:
+        print("paired on seeds:")
+        for line in compare_fruit_planners(results, reference=next(iter(results))):
+            print(line)
     if json_path is not None:
-        doc = {"seed": seed, "seeds": seeds, "wall_s": result.wall_s, "scenarios": summaries}
+        runs = {name: {sc.name: r.summary(sc.name) for sc in r.scenarios} for name, r in results.items()}
+        doc: dict[str, Any] = {
+            "seed": seed,
+            "seeds": seeds,
+            "wall_s": sum(r.wall_s for r in results.values()),
+        }
+        doc["scenarios" if planners == [None] else "planners"] = runs.get("file", runs)
         write_json_atomic(json_path, suite_json_clean(doc))
         print(f"wrote {json_path}")
-    return _exit_status(result.crashed)
+    return _exit_status([c for r in results.values() for c in r.crashed])
 
 
 def _exit_status(crashed: list[str]) -> int:

@@ -100,7 +100,10 @@ class ConstraintConfig:
 class PlannerConfig:
     """Which planner chooses the next viewpoint, and how the BVE optimises."""
 
-    kind: PlannerKind = field(default="bve", metadata=_why("bve, or a baseline: random, circle"))
+    kind: PlannerKind = field(
+        default="bve",
+        metadata=_why("bve, or a baseline: random, circle, fixed (three fixed collinear views)"),
+    )
     optimiser: OptimiserName = field(
         default="slsqp",
         metadata=_why("SLSQP: same viewpoints as trust-constr (interior point) at ~1/30 of the time"),

@@ -30,7 +30,7 @@ from bve_mj.estimation.tracks import Track, Tracker, ViewTracking
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
-from bve_mj.planning.every_fruit import EXPLORE, EveryFruitPlanner, FruitTarget
+from bve_mj.planning.every_fruit import EXPLORE, FruitTarget, PlansForEveryFruit
 from bve_mj.planning.plan import PlanStatus, ViewPlan
 from bve_mj.sim.world import SeesEveryFruit
 
@@ -110,7 +110,7 @@ def explored_deg(directions: list[np.ndarray]) -> float:
 
 def run_every_fruit(
     world: SeesEveryFruit,
-    planner: EveryFruitPlanner,
+    planner: PlansForEveryFruit,
     tracker: Tracker,
     steps: int,
     stop_sigma_m: float,
@@ -212,7 +212,7 @@ def run_every_fruit(
 
 
 def _explore(
-    planner: EveryFruitPlanner,
+    planner: PlansForEveryFruit,
     zone: Belief | None,
     tracker: Tracker,
     world: SeesEveryFruit,

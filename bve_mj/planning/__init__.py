@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from bve_mj.config import LossName, Settings
-from bve_mj.planning.baselines import CirclePlanner, RandomPlanner
+from bve_mj.planning.baselines import CirclePlanner, FixedViewsPlanner, RandomPlanner
 from bve_mj.planning.bve import BvePlanner
 from bve_mj.planning.constraints import (
     Constraint,
@@ -50,6 +50,7 @@ __all__ = [
     "ExtraConstraints",
     "FailedViewDiscount",
     "FieldOfViewCone",
+    "FixedViewsPlanner",
     "LearnsFromFailedViews",
     "LearnsFromFusedViews",
     "MaxEigenvalueLoss",
@@ -85,4 +86,6 @@ def make_planner(
         return BvePlanner(settings, loss, constraint_names, extra_constraints)
     if kind == "random":
         return RandomPlanner(settings, constraint_names, rng, extra_constraints)
+    if kind == "fixed":
+        return FixedViewsPlanner(settings, constraint_names, extra_constraints)
     return CirclePlanner(settings, constraint_names, extra_constraints)

@@ -4,6 +4,10 @@
 - :class:`CirclePlanner`: a fixed orbit about the vertical axis through the estimate,
   advancing one step length a view and projected onto the feasible set; it reverses when
   a constraint blocks the orbit.
+- :class:`FixedViewsPlanner`: three hand-picked, collinear viewpoints (the protocol of the
+  authors' earlier MonoVisual3DFilter: the start view and one either side of it on a
+  horizontal line across the view direction, ``constraints.step_m`` apart), visited in turn
+  (left, right, centre, left, ...) within the step limit, each looking at the estimate.
 
 Both restore feasibility exactly as the BVE does when no point within reach is feasible.
 Constraints marked ``expensive`` (the arm's :class:`~bve_mj.robot.planner.Reachability`, an
@@ -23,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bve_mj.config import Settings
+from bve_mj.errors import ConfigError
 from bve_mj.estimation.belief import Belief
 from bve_mj.planning.constraints import (
     Constraint,
@@ -37,7 +42,7 @@ from bve_mj.planning.constraints import (
 from bve_mj.planning.plan import PlanStatus, ViewPlan
 from bve_mj.planning.solve import feasible_start, minimise
 
-__all__ = ["CirclePlanner", "RandomPlanner"]
+__all__ = ["CirclePlanner", "FixedViewsPlanner", "RandomPlanner"]
 
 
 _MAX_EXPENSIVE_CHECKS = 16
@@ -154,22 +159,94 @@ class CirclePlanner:
         if restoring is not None:
             return restoring
         target = self._orbit_target(k_hat, x_start)
-
-        def distance_sq(x: np.ndarray) -> tuple[float, np.ndarray]:
-            d = x - target
-            return float(d @ d), 2.0 * d
-
-        every: list[Constraint] = [*cheap, step]
-        res = minimise(distance_sq, every, x_start, "slsqp", p.max_iterations)
-        x = res.x if np.all(np.isfinite(res.x)) and max_violation(every, res.x) <= tol else x_start
-        if expensive:  # back off towards the current camera until the arm reaches the point
-            for _ in range(5):
-                if _holds(expensive, x, tol):
-                    break
-                x = 0.5 * (x + c_now)
-            else:
-                x = c_now
+        x, nit, optimal = _towards(target, cheap, expensive, step, x_start, c_now, p.max_iterations, tol)
         if float(np.linalg.norm(x - c_now)) < 0.25 * r_d:
             self.direction = -self.direction  # blocked: go back along the orbit
-        status: PlanStatus = "optimal" if x is res.x else "best_feasible"
-        return ViewPlan(x, k_hat, status, True, 0.0, iterations=res.nit, plan_s=time.perf_counter() - t0)
+        status: PlanStatus = "optimal" if optimal else "best_feasible"
+        return ViewPlan(x, k_hat, status, True, 0.0, iterations=nit, plan_s=time.perf_counter() - t0)
+
+
+def _towards(
+    target: np.ndarray,
+    cheap: Sequence[Constraint],
+    expensive: Sequence[Constraint],
+    step: StepLimit,
+    x_start: np.ndarray,
+    c_now: np.ndarray,
+    max_iterations: int,
+    tol: float,
+) -> tuple[np.ndarray, int, bool]:
+    """The feasible point within the step limit nearest ``target`` (SLSQP from ``x_start``
+    over the cheap constraints; then backed off towards the camera ``c_now`` until the
+    expensive ones hold): (point, iterations, whether the optimiser's point was kept)."""
+
+    def distance_sq(x: np.ndarray) -> tuple[float, np.ndarray]:
+        d = x - target
+        return float(d @ d), 2.0 * d
+
+    every: list[Constraint] = [*cheap, step]
+    res = minimise(distance_sq, every, x_start, "slsqp", max_iterations)
+    x = res.x if np.all(np.isfinite(res.x)) and max_violation(every, res.x) <= tol else x_start
+    if expensive:  # back off towards the current camera until the arm reaches the point
+        for _ in range(5):
+            if _holds(expensive, x, tol):
+                break
+            x = 0.5 * (x + c_now)
+        else:
+            x = c_now
+    return x, int(res.nit), x is res.x
+
+
+@dataclass
+class FixedViewsPlanner:
+    """Three fixed, collinear viewpoints visited in turn (see the module docstring).
+
+    The line is fixed at the first plan: through the camera then, horizontal, across the
+    direction to the estimate then; the views lie ``spacing_m`` (default
+    ``constraints.step_m``) either side of the start. A view the constraints (or the arm)
+    keep the camera from reaching within ``reached_m`` is given up after one blocked move.
+    """
+
+    settings: Settings
+    constraint_names: Sequence[ConstraintName]
+    extra_constraints: ExtraConstraints | None = None
+    spacing_m: float | None = None
+    reached_m: float = 0.01
+    _views: np.ndarray | None = field(default=None, init=False, repr=False)
+    _next: int = field(default=0, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.constraint_names = check_constraint_names(self.constraint_names)
+        if self.spacing_m is not None and not (math.isfinite(self.spacing_m) and self.spacing_m > 0.0):
+            raise ConfigError("spacing_m", self.spacing_m, "a number > 0")
+
+    def views(self, k_hat: np.ndarray, c_start: np.ndarray) -> np.ndarray:
+        """The three viewpoints (left, right, centre) for a start camera and estimate (3, 3)."""
+        d = np.asarray(c_start, dtype=float) - np.asarray(k_hat, dtype=float)
+        across = np.cross(np.array([0.0, 0.0, 1.0]), d)
+        n = float(np.linalg.norm(across))
+        across = np.array([1.0, 0.0, 0.0]) if n < 1e-9 else across / n
+        s = self.settings.step_m if self.spacing_m is None else self.spacing_m
+        c = np.asarray(c_start, dtype=float)
+        return np.array([c + s * across, c - s * across, c])
+
+    def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        t0 = time.perf_counter()
+        p = self.settings.planner
+        tol = p.feasibility_tol
+        k_hat, c_now = belief.centre_m, np.asarray(p_world_camera, dtype=float)
+        if self._views is None:
+            self._views = self.views(k_hat, c_now)
+        task = build_constraints(self.constraint_names, self.settings, k_hat, self.extra_constraints)
+        cheap, expensive = _split(task)
+        step = StepLimit(c_now, self.settings.step_m)
+        restoring, x_start = _restore_or_none(cheap, step, c_now, k_hat, tol, t0)
+        if restoring is not None:
+            return restoring
+        target = self._views[self._next % 3]
+        x, nit, optimal = _towards(target, cheap, expensive, step, x_start, c_now, p.max_iterations, tol)
+        blocked = float(np.linalg.norm(x - c_now)) < 0.25 * self.settings.step_m
+        if float(np.linalg.norm(x - target)) <= self.reached_m or blocked:
+            self._next += 1
+        status: PlanStatus = "optimal" if optimal else "best_feasible"
+        return ViewPlan(x, k_hat, status, True, 0.0, iterations=nit, plan_s=time.perf_counter() - t0)

@@ -15,6 +15,11 @@ fruit's: :mod:`bve_mj.estimation.visibility`). The highest J wins; a fruit hidde
 candidate is left to later views. Why not optimise J itself: each fruit's BVE problem is
 smooth and the arm's joint-space solver handles one look-at target; J over a truss is a sum
 of terms switched on and off by occlusion, which a local optimiser cannot follow.
+
+The baselines (:class:`PatternPlanner`: random, circle, three fixed views) plan without the
+tracks' information: one single-target baseline planner, under the same constraints and the
+arm's reachability, aimed at the centre of the fruit found so far (the work zone's centre
+before any), its views planned for no fruit in particular (``planned_for`` = :data:`EXPLORE`).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -36,7 +42,15 @@ from bve_mj.planning.plan import (
     ViewPlan,
 )
 
-__all__ = ["EXPLORE", "CandidateScore", "EveryFruitPlanner", "FruitTarget", "information_gain"]
+__all__ = [
+    "EXPLORE",
+    "CandidateScore",
+    "EveryFruitPlanner",
+    "FruitTarget",
+    "PatternPlanner",
+    "PlansForEveryFruit",
+    "information_gain",
+]
 
 EXPLORE = -1
 """The planner key (and ``planned_for``) of the views that explore the work zone."""
@@ -75,6 +89,35 @@ def information_gain(belief: Belief, H: np.ndarray, noise_cov: np.ndarray) -> fl
     before = np.linalg.slogdet(P[:3, :3])[1]
     after = np.linalg.slogdet(post[:3, :3])[1]
     return float(before - after)
+
+
+@runtime_checkable
+class PlansForEveryFruit(Protocol):
+    """What the every-fruit loop asks of its planner."""
+
+    def plan(
+        self,
+        fruits: Sequence[FruitTarget],
+        p_world_camera: np.ndarray,
+        iteration: int,
+        q: np.ndarray | None = None,
+    ) -> tuple[ViewPlan, int]: ...
+
+    def explore(
+        self, zone: Belief, p_world_camera: np.ndarray, iteration: int, q: np.ndarray | None = None
+    ) -> ViewPlan: ...
+
+    def forget(self, fruit: int) -> None: ...
+
+    def set_configuration(self, q: np.ndarray) -> None: ...
+
+    def note_failed_view(
+        self, fruit: int, p_world_camera: np.ndarray, p_world_target: np.ndarray
+    ) -> None: ...
+
+    def note_fused_view(self, fruit: int, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None: ...
+
+    def note_explored(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None: ...
 
 
 @dataclass
@@ -214,3 +257,64 @@ class EveryFruitPlanner:
             plan.p_world_camera, plan.p_world_target, plan.status, plan.feasible, plan.max_violation,
             plan.loss, plan.iterations, plan_s, plan.q,
         ), fruit  # fmt: skip
+
+
+@dataclass
+class PatternPlanner:
+    """A baseline for every fruit: one single-target baseline planner (random, circle, fixed
+    views) aimed at the centre of the fruit found so far, blind to their information.
+
+    Args:
+        planner: the single-target baseline (with the arm's reachability).
+        zone: the work zone's belief: its centre is the aim before any fruit is tracked, its
+            covariance the belief every plan is made for.
+    """
+
+    planner: Planner
+    zone: Belief
+    _aimed: Belief | None = field(default=None, init=False, repr=False)
+
+    def _aim(self, fruits: Sequence[FruitTarget]) -> Belief:
+        if not fruits:
+            return self.zone
+        centre = np.mean([f.belief.centre_m for f in fruits], axis=0)
+        return Belief(np.r_[centre, self.zone.mean[3:]], self.zone.cov)
+
+    def _plan(self, aim: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        plan = self.planner.plan(aim, p_world_camera, iteration)
+        if not (np.all(np.isfinite(plan.p_world_camera)) and np.all(np.isfinite(plan.p_world_target))):
+            raise BveError("the baseline's viewpoint is not finite")
+        return plan
+
+    def plan(
+        self,
+        fruits: Sequence[FruitTarget],
+        p_world_camera: np.ndarray,
+        iteration: int,
+        q: np.ndarray | None = None,
+    ) -> tuple[ViewPlan, int]:
+        """The baseline's next viewpoint, planned for no fruit (:data:`EXPLORE`)."""
+        self._aimed = self._aim(fruits)
+        return self._plan(self._aimed, p_world_camera, iteration), EXPLORE
+
+    def explore(
+        self, zone: Belief, p_world_camera: np.ndarray, iteration: int, q: np.ndarray | None = None
+    ) -> ViewPlan:
+        """The baseline's next viewpoint (it explores as it plans, aimed where it last was)."""
+        return self._plan(self._aimed or zone, p_world_camera, iteration)
+
+    def forget(self, fruit: int) -> None:
+        """Nothing to forget: the baseline keeps no per-fruit state."""
+
+    def set_configuration(self, q: np.ndarray) -> None:
+        if isinstance(self.planner, SyncsToEncoders):
+            self.planner.set_configuration(q)
+
+    def note_failed_view(self, fruit: int, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        """Ignored: the baseline does not learn from views."""
+
+    def note_fused_view(self, fruit: int, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        """Ignored: the baseline does not learn from views."""
+
+    def note_explored(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        """Ignored: the baseline does not learn from views."""

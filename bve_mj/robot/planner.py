@@ -33,7 +33,7 @@ import numpy as np
 from bve_mj.config import Formulation, LossName, Settings
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.belief import Belief
-from bve_mj.planning.baselines import CirclePlanner, RandomPlanner
+from bve_mj.planning.baselines import CirclePlanner, FixedViewsPlanner, RandomPlanner
 from bve_mj.planning.bve import SEED_DIRECTIONS, BvePlanner
 from bve_mj.planning.constraints import Constraint, ConstraintName, StepLimit, max_violation
 from bve_mj.planning.plan import Planner, PlanStatus, ViewPlan
@@ -302,4 +302,6 @@ def make_arm_planner(
 
     if kind == "random":
         return RandomPlanner(settings, constraint_names, rng, extra)
+    if kind == "fixed":
+        return FixedViewsPlanner(settings, constraint_names, extra)
     return CirclePlanner(settings, constraint_names, extra)
