@@ -1,0 +1,60 @@
+"""What an episode leaves: a record per view and the finished episode."""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from bve_mj.estimation import Belief
+from bve_mj.loop.events import Event, EventKind
+from bve_mj.loop.outcomes import Outcome
+from bve_mj.planning.plan import PlanStatus
+
+__all__ = ["EpisodeResult", "ViewRecord"]
+
+
+@dataclass(frozen=True)
+class ViewRecord:
+    """One view: where the camera was, what the planner said, what the filter made of it.
+
+    ``iteration`` 0 is the view from the start pose (no plan: status None). ``events``: what
+    went wrong and how it was handled (:class:`~bve_mj.loop.events.Event`: ``planner_failed``
+    with its reason, ``ik_failed``, ``belief_reset``, ``ambiguous``, and injected faults:
+    ``dropped``, ``false_detection``, ``outlier``, ``ik_failure``).
+    """
+
+    iteration: int
+    p_world_camera: np.ndarray
+    plan_status: PlanStatus | None
+    plan_feasible: bool
+    plan_s: float
+    measured: bool
+    accepted: bool
+    nis: float
+    belief: Belief
+    world: dict[str, object] | None = None
+    events: tuple[Event, ...] = ()
+
+    def has(self, kind: EventKind) -> bool:
+        """Whether an event of this kind happened at this view."""
+        return any(e.kind == kind for e in self.events)
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """A finished episode: the prior, every view, the final belief, and the wall time [s]."""
+
+    prior: Belief
+    views: tuple[ViewRecord, ...]
+    wall_s: float
+    outcome: Outcome = Outcome.MAX_VIEWS
+
+    @property
+    def final(self) -> Belief:
+        return self.views[-1].belief if self.views else self.prior
+
+    def event_counts(self) -> dict[str, int]:
+        """How often each kind of event happened, over all views."""
+        return dict(Counter(e.kind for v in self.views for e in v.events))
