@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 import sys
-import sysconfig
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -46,10 +45,13 @@ MANIPULATOR_H_LIMITS: dict[str, tuple[tuple[float, float], ...]] = {
 
 @cache
 def models_dir() -> Path:
-    """The ``models/`` folder: beside the package in a checkout, or installed data."""
+    """The ``models/`` folder: inside the installed package (``bve_mj/models``, which a wheel
+    carries; found through :mod:`importlib.resources`), or beside the package in a checkout
+    (and an editable install)."""
+    from importlib.resources import files
+
     here = Path(__file__).resolve().parents[2] / "models"
-    candidates = [here, Path(sysconfig.get_path("data")) / "share" / "bve_mj" / "models"]
-    for c in candidates:
+    for c in (Path(str(files("bve_mj") / "models")), here):
         if (c / "manipulator_h" / "manipulator_h.urdf").is_file():
             return c
     raise ConfigError("models", str(here), "the bve_mj models folder (reinstall bve_mj)")
