@@ -42,6 +42,7 @@ def episode_cli_settings(args: argparse.Namespace) -> Settings:
         planner=given(kind=args.planner, planning_model=args.planning_model),
         measurement=given(kind=args.measurement),
         filter=given(kind=args.filter, state=args.state),
+        detector=given(kind=getattr(args, "detector", None)),
         robot=given(name=args.robot),
         tracking=given(fruits=fruits),
     )
@@ -67,10 +68,9 @@ def cmd_episode(args: argparse.Namespace) -> int:
     if settings.tracking.fruits == "all":
         from bve_mj.cli.fruits import run_every_fruit_cli
 
-        if video_path is not None or plots_prefix is not None:
-            what = "video" if video_path is not None else "plots"
-            raise ConfigError(what, getattr(args, what), "not with --fruits all (the one-target episode's)")
-        return run_every_fruit_cli(settings, seed, json_path, quiet=args.quiet)
+        if plots_prefix is not None:
+            raise ConfigError("plots", args.plots, "not with --fruits all (the one-target episode's)")
+        return run_every_fruit_cli(settings, seed, json_path, quiet=args.quiet, video_path=video_path)
 
     import numpy as np
 

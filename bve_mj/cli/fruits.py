@@ -1,4 +1,4 @@
-"""``bve-mj episode --fruits all``: every ripe fruit of the truss, its table and JSON."""
+"""``bve-mj episode --fruits all``: every ripe fruit of the truss, its table, JSON and video."""
 
 from __future__ import annotations
 
@@ -18,13 +18,28 @@ if TYPE_CHECKING:
 __all__ = ["run_every_fruit_cli"]
 
 
-def run_every_fruit_cli(settings: Settings, seed: int, json_path: Path | None, *, quiet: bool = False) -> int:
-    """Run the every-fruit episode, print its views and fruit, write its JSON; the exit status
-    from the outcome (what the robot knows: 3 for ``incomplete``, ``never_detected``,
-    ``unreachable``), as the one-target episode's."""
+def run_every_fruit_cli(
+    settings: Settings,
+    seed: int,
+    json_path: Path | None,
+    *,
+    quiet: bool = False,
+    video_path: Path | None = None,
+) -> int:
+    """Run the every-fruit episode, print its views and fruit, write its JSON and (with
+    ``video_path``) its video; the exit status from the outcome (what the robot knows: 3 for
+    ``incomplete``, ``never_detected``, ``unreachable``), as the one-target episode's."""
     from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
 
-    episode = run_every_fruit_episode(settings, seed)
+    recorder = None
+    if video_path is not None:
+        from bve_mj.reporting.fruits_video import FruitsRecorder
+
+        recorder = FruitsRecorder(video_path)
+    try:
+        episode = run_every_fruit_episode(settings, seed, recorder=recorder)
+    finally:
+        frames = recorder.close() if recorder is not None else 0
     doc = episode.to_json()
     s = episode.settings
     print(
@@ -79,6 +94,12 @@ def run_every_fruit_cli(settings: Settings, seed: int, json_path: Path | None, *
                 f"{1e3 * visit['distance_m']:.0f} mm from its estimate, least clearance of the arm to "
                 f"any fruit {clear} mm" + (f" ({visit['reason']})" if visit["reason"] else "")
             )
+    if video_path is not None and frames == 0:
+        print(f"no video written to {video_path}: the episode ended before its first view")
+    elif video_path is not None:
+        record = [(v["timings_s"] or {}).get("record_s", 0.0) for v in doc["views"][1:]]
+        per_view = f"; recording {1e3 * float(np.median(record)):.0f} ms per move (median)" if record else ""
+        print(f"wrote {video_path} ({frames} frames{per_view})")
     if json_path is not None:
         write_json_atomic(json_path, doc)
         print(f"wrote {json_path}")
