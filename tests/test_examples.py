@@ -26,6 +26,8 @@ def _args(name: str, out: Path) -> list[str]:
     """Each example's output folder argument (position as its docstring says)."""
     return {
         "approach_video.py": [str(out)],
+        "box_detector.py": ["3"],  # prints only
+        "gym_policies.py": ["1"],  # episodes per policy (prints only)
         "campaign.py": [str(out / "campaign"), "1"],  # 1 run per cell (5 by default: 39 s)
         "headless_episode.py": ["2"],
         "paper_table.py": ["3"],  # runs per experiment (20 by default: 50 s)
@@ -37,7 +39,9 @@ def _args(name: str, out: Path) -> list[str]:
 def test_every_example_is_listed():
     assert EXAMPLES == [
         "approach_video.py",
+        "box_detector.py",
         "campaign.py",
+        "gym_policies.py",
         "headless_episode.py",
         "paper_table.py",
         "render_scene.py",

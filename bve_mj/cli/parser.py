@@ -7,6 +7,7 @@ import argparse
 from bve_mj.cli.args import Parser, one_of, version_text
 from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.config.fields import (
+    DetectorKind,
     FilterKind,
     Formulation,
     FruitsMode,
@@ -70,6 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ep.add_argument("--planner", default=None, help=one_of(PlannerKind))
     ep.add_argument("--filter", default=None, help=f"{one_of(FilterKind)} (default from settings: ekf)")
+    ep.add_argument(
+        "--detector", default=None, help=f"{one_of(DetectorKind)} (default from settings: builtin)"
+    )
     ep.add_argument(
         "--state",
         default=None,
@@ -180,6 +184,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help=f"{one_of(FruitsMode)}: localise the target (default) or every ripe fruit of each scene",
     )
+    sc.add_argument(
+        "--planners",
+        default=None,
+        help=f"with --fruits all: any of {one_of(PlannerKind, ',', ',')} on the same seeds, compared "
+        "with the first (default: each file's planner)",
+    )
     sc.add_argument("--dir", default=None, help="a folder of scenario TOML files instead of the suite")
     sc.add_argument("--workers", default=None, help="local processes (default: all cores)")
     sc.add_argument("--json", default=None, help="write per-scenario metrics and episode rows here")
@@ -223,4 +233,16 @@ def build_parser() -> argparse.ArgumentParser:
     res.add_argument("--workers", default=None, help="local processes (default: all cores)")
     res.add_argument("--scheduler", default=None, help="Dask distributed scheduler address instead")
     res.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    scn = sub.add_parser(
+        "scene",
+        help="write the greenhouse of an episode (seed, settings) as an MJCF folder MuJoCo's viewer opens",
+        description="Write the scene `bve-mj episode --seed S --config X` builds as DIR/scene.xml with its "
+        "textures (python -m mujoco.viewer --mjcf=DIR/scene.xml opens it). DIR must be new, empty, or "
+        "hold a scene this command wrote (which is replaced); nothing else in it is overwritten.",
+    )
+    scn.add_argument("--seed", default="0", metavar="S", help="the episode's seed (default 0)")
+    scn.add_argument(
+        "--config", default=None, metavar="X.toml", help="scenario TOML (sections of bve_mj.config.Settings)"
+    )
+    scn.add_argument("--out", required=True, metavar="DIR", help="the folder to write (created)")
     return parser

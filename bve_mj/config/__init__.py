@@ -27,6 +27,7 @@ from __future__ import annotations
 from bve_mj.config.episode import DetectorConfig, EpisodeConfig, FaultConfig
 from bve_mj.config.fields import (
     ConstraintName,
+    DetectorKind,
     FilterKind,
     Formulation,
     FruitsMode,
@@ -72,6 +73,7 @@ __all__ = [
     "ConstraintConfig",
     "ConstraintName",
     "DetectorConfig",
+    "DetectorKind",
     "EpisodeConfig",
     "FaultConfig",
     "FilterConfig",

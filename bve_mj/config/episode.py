@@ -9,6 +9,7 @@ import numpy as np
 
 from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.config.fields import (
+    DetectorKind,
     PriorKind,
     _choice,
     _non_negative,
@@ -25,9 +26,21 @@ __all__ = ["DetectorConfig", "EpisodeConfig", "FaultConfig"]
 
 @dataclass(frozen=True, kw_only=True)
 class DetectorConfig:
-    """Colour segmentation, separation of touching fruit (outline arcs grouped into circles),
-    and circle (cone) fit of the target tomato, with the checks that refuse a poor one."""
+    """Which detector measures the fruit, and the built-in one's settings: colour segmentation,
+    separation of touching fruit (outline arcs grouped into circles), and circle (cone) fit of
+    the target tomato, with the checks that refuse a poor one. ``kind = "synthetic_boxes"``
+    replaces it with boxes from the true projection of the fruit in view (``box_noise_px``,
+    ``miss_p``, ``false_positives``) through the box adapter
+    (:mod:`bve_mj.perception.adapters`): a learned detector's effect, studied."""
 
+    kind: DetectorKind = field(
+        default="builtin",
+        metadata=_why(
+            "builtin: the colour detector (silhouette arcs, cone fit); synthetic_boxes: bounding "
+            "boxes from the true projection of every ripe fruit in view, with corner noise, misses "
+            "and false positives, measured by the box adapter (a learned detector, simulated)"
+        ),
+    )
     red_hue_max: int = field(default=8, metadata=_why("ripe red: OpenCV hue <= this or >= red_hue_min_wrap"))
     red_hue_min_wrap: int = field(default=170, metadata=_why("ripe red wraps around hue 180"))
     min_saturation: int = field(default=110, metadata=_why("excludes pinkish highlights and grey", "0-255"))
@@ -121,6 +134,25 @@ class DetectorConfig:
         ),
     )
 
+    box_noise_px: float = field(
+        default=2.0,
+        metadata=_why(
+            "synthetic_boxes: Gaussian sigma of each box corner coordinate; the box adapter declares "
+            "it (centre sigma = this / sqrt 2, apparent radius sigma = this / 2 near the optical axis)",
+            "px",
+        ),
+    )
+    miss_p: float = field(
+        default=0.0, metadata=_why("synthetic_boxes: probability that a fruit in view gets no box")
+    )
+    false_positives: float = field(
+        default=0.0,
+        metadata=_why(
+            "synthetic_boxes: mean number of false boxes per image (Poisson), fruit-sized, anywhere "
+            "in the image"
+        ),
+    )
+
     @staticmethod
     def ripe_hue_limits() -> dict[str, int]:
         """The OpenCV hue (0-180) up to which the coloured skin of each ripeness class reaches,
@@ -131,6 +163,13 @@ class DetectorConfig:
         return {"red": 8, "light_red": 30, "pink": 34, "turning": 37, "orange": 37}
 
     def __post_init__(self) -> None:
+        _choice("detector", "kind", self.kind, DetectorKind)
+        if not 0.0 <= _number("detector", "box_noise_px", self.box_noise_px) <= 100.0:
+            raise ConfigError("detector.box_noise_px", self.box_noise_px, "a number in [0, 100]")
+        if not 0.0 <= _number("detector", "miss_p", self.miss_p) <= 1.0:
+            raise ConfigError("detector.miss_p", self.miss_p, "a probability in [0, 1]")
+        if not 0.0 <= _number("detector", "false_positives", self.false_positives) <= 100.0:
+            raise ConfigError("detector.false_positives", self.false_positives, "a number in [0, 100]")
         for name in ("red_hue_max", "red_hue_min_wrap", "min_saturation", "min_value", "extend_hue_max"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 255:

@@ -14,6 +14,7 @@ __all__ = [
     "MAX_COUNT",
     "MAX_MAGNITUDE",
     "ConstraintName",
+    "DetectorKind",
     "FilterKind",
     "Formulation",
     "FruitType",
@@ -40,6 +41,9 @@ MeasurementKind = Literal["auto", "range", "camera"]
 FilterKind = Literal["ekf", "ukf"]
 
 
+DetectorKind = Literal["builtin", "synthetic_boxes"]
+
+
 StateKind = Literal["auto", "centre", "centre_radius"]
 
 
@@ -55,7 +59,7 @@ OptimiserName = Literal["slsqp", "trust-constr"]
 PlanningModel = Literal["paper", "consistent"]
 
 
-PlannerKind = Literal["bve", "random", "circle"]
+PlannerKind = Literal["bve", "random", "circle", "fixed"]
 
 
 PriorSource = Literal["auto", "filter", "views"]

@@ -59,7 +59,12 @@ class Detection:
             outline it saw [px, as f·angle].
         centre_jackknife_px, radius_jackknife_px: the spread of the fits that leave one arc
             of the outline out (0 for a single arc) [px, as f·angle].
-    The noise model (:mod:`bve_mj.estimation.noise`) turns these into the measurement's σ.
+        measurement_cov: the covariance (3, 3) [rad²] of z = (a_y/a_x, a_z/a_x, α) (bearing
+            as normalised image coordinates, apparent angular radius) when the detector states
+            its own noise (the box and mask adapters of :mod:`bve_mj.perception.adapters`);
+            None: the calibrated noise model gives it (the built-in detector).
+    The noise model (:mod:`bve_mj.estimation.noise`) turns these into the measurement's σ,
+    unless ``measurement_cov`` says it.
     """
 
     centre_px: np.ndarray
@@ -77,6 +82,7 @@ class Detection:
     radius_fit_px: float = 0.0
     centre_jackknife_px: float = 0.0
     radius_jackknife_px: float = 0.0
+    measurement_cov: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from bve_mj.estimation.models import BearingSizeModel, CameraModel, RangeModel, 
 from bve_mj.estimation.noise import NoiseModel, load_noise_model, measure
 from bve_mj.estimation.tracks import Sighting
 from bve_mj.perception.detection import Detection, NoDetection, Prediction
-from bve_mj.perception.detector import detect
+from bve_mj.perception.protocol import DetectionRequest, Detector, EveryFruitDetector, detector_from_settings
 from bve_mj.planning.plan import ViewPlan
 from bve_mj.robot.ik import look_at_ik
 from bve_mj.robot.kinematics import ArmKinematics
@@ -31,6 +31,7 @@ from bve_mj.sim.controller import JointTrajectoryController, MoveReport
 from bve_mj.sim.render import OffscreenRenderer
 from bve_mj.sim.scene_model import SceneInfo
 from bve_mj.sim.sensors import calibrated_intrinsics, noisy_encoders, noisy_image
+from bve_mj.sim.true_boxes import true_boxes
 from bve_mj.sim.world import Observation
 
 __all__ = ["MujocoWorld", "ViewTimings", "declared_noise"]
@@ -99,6 +100,10 @@ class MujocoWorld:
         on_step: called with the simulation time after every physics step of a move.
         noise: the detector's calibrated noise when the radius is in the state (default:
             loaded from ``measurement.noise_model``).
+        detector: what measures the fruit in each image (the
+            :class:`~bve_mj.perception.protocol.Detector` protocol; default: the one
+            ``detector.kind`` names, :func:`~bve_mj.perception.protocol.detector_from_settings`:
+            the built-in colour detector, or synthetic boxes from the scene's ground truth).
     """
 
     def __init__(
@@ -114,6 +119,7 @@ class MujocoWorld:
         keep_images: bool = False,
         on_step: Callable[[float], None] | None = None,
         noise: NoiseModel | None = None,
+        detector: Detector | None = None,
     ) -> None:
         self.settings, self.kin, self.model, self.info = settings, kin, model, info
         self.data = mujoco.MjData(model)
@@ -141,10 +147,36 @@ class MujocoWorld:
         if noise is None and settings.filter.state == "centre_radius":
             self.noise = load_noise_model(settings.measurement.noise_model)
             self.noise.check_camera(cam, settings.measurement.noise_model)
+        self.detector = detector if detector is not None else self._settings_detector()
         self._target = np.asarray(target, dtype=float).copy()
         self._keep_images = keep_images
         self._on_step = on_step
         self.last = _Last()
+
+    def _settings_detector(self) -> Detector:
+        """The detector ``detector.kind`` names; synthetic boxes get their own stream (spawned
+        from the sensor's seed, so the sensor noise stays what it is with the built-in)."""
+        s = self.settings
+        if s.detector.kind == "builtin":
+            return detector_from_settings(s.detector, self.fruit_prior, self.measurement)
+        seed = self._rng.bit_generator.seed_seq
+        box_rng = np.random.default_rng(
+            seed.spawn(1)[0] if isinstance(seed, np.random.SeedSequence) else self._rng.integers(2**63)
+        )
+        return detector_from_settings(
+            s.detector,
+            self.fruit_prior,
+            self.measurement,
+            true_boxes=self.true_boxes,
+            image_size_px=(s.camera.width_px, s.camera.height_px),
+            rng=box_rng,
+        )
+
+    def true_boxes(self) -> np.ndarray:
+        """The true bounding boxes (n, 4) [px, not clipped] of the ripe fruit visible in the
+        current view, as the rendered camera sees them (:func:`bve_mj.sim.true_boxes.true_boxes`)."""
+        s = self.settings
+        return true_boxes(self.model, self.data, self.info, s.camera, s.detector.ripe_class)
 
     # ------------------------------------------------------------------ state
     @property
@@ -227,14 +259,12 @@ class MujocoWorld:
         if belief is not None:  # the estimate picks its fruit among those in view, in 3-D
             b = belief.position
             prediction = Prediction(R.T @ (b.mean - p), R.T @ b.cov @ R)
-            det = detect(
-                image, self.intrinsics, self.fruit_prior, self.measurement, s.detector,
-                prediction=prediction, up_camera=R.T[:, 2],
-            )  # fmt: skip
+            request = DetectionRequest(self.intrinsics, prediction=prediction, up_camera=R.T[:, 2])
         else:
             ahead = R.T @ (self._target - p)
             predicted = self.intrinsics.project(ahead) if ahead[0] > 1e-3 else None
-            det = detect(image, self.intrinsics, self.fruit_prior, self.measurement, s.detector, predicted)
+            request = DetectionRequest(self.intrinsics, predicted_px=predicted)
+        det = self.detector.detect(image, request)
         self.last.detection = det
         self.last.timings.detect_s = time.perf_counter() - t1
         if not isinstance(det, Detection):
@@ -256,16 +286,18 @@ class MujocoWorld:
         """Every ripe fruit in view, each measured as the radius state's camera measurement
         (bearing of the centre and apparent angular radius, the calibrated noise); and a model
         at this view's camera pose (as the encoders report it) for visibility predictions."""
-        from bve_mj.perception.all_fruit import detect_all
-
         if self.noise is None:
             raise ValueError("every fruit is measured with the radius in the state (centre_radius)")
+        if not isinstance(self.detector, EveryFruitDetector):
+            raise ValueError(
+                "every fruit is measured by a detector with detect_all; "
+                f"{type(self.detector).__name__} has none"
+            )
         image, p, R, t1 = self._capture()
         s = self.settings
-        found = detect_all(
-            image, self.intrinsics, self.fruit_prior, self.measurement, s.detector,
-            up_camera=R.T[:, 2], max_range_m=s.tracking.max_range_m,
-        )  # fmt: skip
+        found = self.detector.detect_all(
+            image, DetectionRequest(self.intrinsics, up_camera=R.T[:, 2]), max_range_m=s.tracking.max_range_m
+        )
         self.last.every = found
         self.last.timings.detect_s = time.perf_counter() - t1
         sightings = []
