@@ -110,6 +110,10 @@ def _cli(*args):
         (["scenarios", "--fruits", "every"], "fruits"),
         (["episode", "--fruits", "all", "--measurement", "range"], "tracking.fruits"),
         (["scenarios", "--fruits", "all", "--measurement", "range"], "measurement"),
+        (["scenarios", "--planners", "bve,circle"], "planners"),
+        (["scenarios", "--fruits", "all", "--planners", "bve,orbit"], "planners"),
+        (["scenarios", "--fruits", "all", "--planners", "bve,bve"], "planners"),
+        (["episode", "--fruits", "all", "--planner", "spiral"], "planner"),
     ],
 )
 def test_bad_fruits_input_exits_2_with_one_line(args, field):
@@ -117,6 +121,59 @@ def test_bad_fruits_input_exits_2_with_one_line(args, field):
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and field in lines[0], r.stderr
+
+
+def _row(run, views_to_truss, outcome="converged"):
+    fruit = {"error_mm": 1.0, "nees": 2.0, "localised": True, "within": True, "radius_error_mm": 0.1}
+    return {
+        "run": run, "outcome": outcome, "views": 10, "views_to_truss": views_to_truss, "fruits": [fruit],
+        "false_tracks": 0, "plan_ms": [1.0], "track_ms": [1.0], "tracks_max": 1, "wall_s": 1.0,
+    }  # fmt: skip
+
+
+def test_planners_are_compared_on_the_same_seeds_never_counting_as_more_views_than_any():
+    """Paired by run: BVE fewer on runs 0, 1 (the baseline never got there on 1), as many on
+    run 2 (both never), more on run 3; the median counts never as infinitely many."""
+    from types import SimpleNamespace
+
+    from bve_mj.campaigns.fruit_suite import FruitSuiteResult, compare_fruit_planners
+
+    sc = (SimpleNamespace(name="truss"),)
+    bve = FruitSuiteResult(sc, {"truss": (_row(0, 5), _row(1, 6), _row(2, None), _row(3, 9))}, 0, 4, 1.0)
+    fixed = FruitSuiteResult(sc, {"truss": (_row(0, 7), _row(1, None), _row(2, None), _row(3, 8))}, 0, 4, 1.0)
+    assert bve.summary("truss")["views_to_truss_median"] == 7.5
+    assert fixed.summary("truss")["views_to_truss_median"] == float("inf")
+    assert fixed.summary("truss")["truss_pct"] == 50.0
+    lines = compare_fruit_planners({"bve": bve, "fixed": fixed})
+    row = next(line for line in lines if line.split()[:2] == ["truss", "fixed"])
+    assert "2/1/1" in row.replace(" ", ""), row
+    with pytest.raises(Exception, match="planners"):
+        compare_fruit_planners({"fixed": fixed})
+
+
+def test_a_baseline_aims_at_the_fruit_found_and_plans_for_none_of_them():
+    from bve_mj.planning.every_fruit import EXPLORE, PatternPlanner
+
+    seen = []
+
+    class Record:
+        def plan(self, belief, p_world_camera, iteration):
+            seen.append(belief.centre_m.copy())
+            return ViewPlan(p_world_camera + 0.01, belief.centre_m, "optimal", True, 0.0)
+
+    zone = Belief(np.array([0.5, 0.0, 0.4, 0.03]), np.diag([0.01, 0.01, 0.01, 1e-6]))
+    pattern = PatternPlanner(Record(), zone)
+    camera = np.array([0.2, 0.0, 0.4])
+    _, planned_for = pattern.plan([], camera, 1)
+    assert planned_for == EXPLORE and np.allclose(seen[-1], zone.centre_m)
+    fruits = [
+        FruitTarget(i, Belief(np.array([0.5, y, 0.4, 0.03]), 1e-6 * np.eye(4)), False, 1e-3)
+        for i, y in enumerate((-0.02, 0.04))
+    ]
+    pattern.plan(fruits, camera, 2)
+    assert np.allclose(seen[-1], [0.5, 0.01, 0.4])
+    pattern.explore(zone, camera, 3)  # exploring keeps the aim at the fruit
+    assert np.allclose(seen[-1], [0.5, 0.01, 0.4])
 
 
 def test_a_tracking_section_is_validated():
@@ -160,3 +217,35 @@ def test_a_ripe_truss_of_six_is_localised_and_every_fruit_visited_without_touchi
         "localised",
     } <= set(doc["fruits"][0])
     assert "unmatched_tracks" in doc
+
+
+def test_a_visit_path_is_checked_against_every_track_sphere_on_the_way_not_only_at_its_ends():
+    """The arm's geoms along the joint-space path: a sphere the wrist sweeps through halfway
+    is found though both ends are clear of it; far away it is not."""
+    from types import SimpleNamespace
+
+    import mujoco
+
+    from bve_mj.loop.harvest import _path_clearance
+    from bve_mj.loop.mujoco import episode_settings
+    from bve_mj.loop.start import start_episode
+    from bve_mj.sim.arm import CAMERA_NAME
+
+    start = start_episode(episode_settings(Settings()), 1)
+    m, kin = start.model, start.kin
+    data = mujoco.MjData(m)
+    adr = np.array([m.jnt_qposadr[m.joint(n).id] for n in kin.joint_names])
+    world = SimpleNamespace(model=m, data=data, kin=kin, qpos_adr=adr)
+    q0 = start.q_start
+    q1 = q0.copy()
+    q1[0] += 0.6  # swing the base: the wrist sweeps an arc
+    data.qpos[adr] = q0 + 0.5 * (q1 - q0)
+    mujoco.mj_kinematics(m, data)
+    mujoco.mj_camlight(m, data)
+    halfway = data.cam_xpos[m.camera(CAMERA_NAME).id].copy()
+    data.qpos[adr] = q0
+    sphere = np.array([[*halfway, 0.02]])
+    assert _path_clearance(world, q0, q1, sphere) < 0.0
+    assert _path_clearance(world, q0, q0, sphere) > 0.0 and _path_clearance(world, q1, q1, sphere) > 0.0
+    far = np.array([[*(halfway + [0.0, 0.0, 2.0]), 0.02]])
+    assert _path_clearance(world, q0, q1, far) > 1.0

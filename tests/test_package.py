@@ -54,7 +54,7 @@ LAYERS = [
     {"robot"},
     {"sim"},
     {"loop"},
-    {"campaigns"},
+    {"campaigns", "gym"},
     {"reporting"},
     {"cli"},
 ]
@@ -114,3 +114,17 @@ def test_no_module_is_longer_than_a_reader_can_hold():
     }
     long = {name: n for name, n in lines.items() if n > MAX_MODULE_LINES}
     assert not long, f"modules over {MAX_MODULE_LINES} lines: {long}"
+
+
+def test_every_suite_scenario_ships_in_the_wheel():
+    """pyproject's data-files list every scenario of the suite (a non-editable install finds
+    the suite through them: a scene left out is missing there)."""
+    from pathlib import Path
+
+    import tomllib
+
+    root = Path(__file__).resolve().parents[1]
+    files = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["data-files"]
+    shipped = set(files["share/bve_mj/scenarios"])
+    suite = {p.relative_to(root).as_posix() for p in (root / "examples/scenarios/suite").glob("*.toml")}
+    assert suite == shipped, (suite - shipped, shipped - suite)

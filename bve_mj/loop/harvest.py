@@ -10,18 +10,22 @@ within a class the one nearest the camera goes first (less travel).
 
 **Visit**: the camera at the approach distance from the estimate, looking at it, from the
 direction fruit → camera now, or from directions near it (up to 40° away) when that pose is
-unreachable or too close to another fruit (closer than its radius plus ``CLEARANCE_M``); look-at
-IK, then the position controller drives the arm there in physics. Every few physics steps of
-the move the least distance between the arm's geoms and every fruit's geom is measured
-(MuJoCo's ``mj_geomDistance``): a visit touches a fruit when it falls to zero.
+unreachable or too close to another fruit (closer than its radius plus ``CLEARANCE_M``), or
+when the arm would pass too close to a fruit on its way: the straight joint-space path the
+controller follows (sampled) must keep every arm geom ``PATH_CLEARANCE_M`` from every track's
+sphere (its estimated centre and radius plus three σmax; the margin is in the sphere): what
+the robot knows, not the scene's truth. Look-at IK, then the position controller drives the
+arm there in physics. Every few physics steps of the move the least distance between the
+arm's geoms and every true fruit's geom is measured (MuJoCo's ``mj_geomDistance``): a visit
+touches a fruit when it falls to zero.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import mujoco
 import numpy as np
@@ -35,10 +39,15 @@ from bve_mj.robot.ik import IkOptions, look_at_ik
 from bve_mj.sim.mujoco_world import MujocoWorld
 from bve_mj.sim.scene_model import SceneInfo, fruit_geom_name
 
-__all__ = ["CLEARANCE_M", "HarvestResult", "Visit", "harvest", "harvest_order"]
+__all__ = ["CLEARANCE_M", "HarvestResult", "RecordsHarvest", "Visit", "harvest", "harvest_order"]
 
 CLEARANCE_M = 0.03
 """The camera keeps at least this from every other fruit's surface at a visit's pose [m]."""
+
+PATH_CLEARANCE_M = 0.0
+"""The arm's geoms keep at least this from every track's sphere along a visit's path [m]."""
+
+_PATH_SAMPLES = 16  # configurations checked along a visit's joint-space path
 
 _EXPOSURE_CLASS_DEG = 30.0
 _CHECK_EVERY = 10  # physics steps between clearance checks
@@ -65,6 +74,19 @@ class Visit:
     true_distance_m: float
     clearance_m: float
     reason: str | None = None
+
+
+class RecordsHarvest(Protocol):
+    """What a video of the harvest (``bve_mj.reporting.fruits_video.FruitsRecorder``) is told:
+    every physics step of the moves, the order, each visit before the move and after it."""
+
+    def on_step(self, sim_time: float) -> None: ...
+
+    def on_order(self, order: Sequence[int]) -> None: ...
+
+    def on_visit(self, track: int) -> None: ...
+
+    def on_visited(self, visit: Visit) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -103,16 +125,28 @@ def harvest_order(
 
 
 def harvest(
-    world: MujocoWorld, fruits: Sequence[FruitState], settings: Settings, info: SceneInfo
+    world: MujocoWorld,
+    fruits: Sequence[FruitState],
+    settings: Settings,
+    info: SceneInfo,
+    recorder: RecordsHarvest | None = None,
 ) -> HarvestResult:
-    """Order the localised fruit and visit each (module docstring)."""
+    """Order the localised fruit and visit each (module docstring); ``recorder`` (a video)
+    is told the order and each visit, and sees every physics step of the moves."""
     cam = settings.camera
     localised = [f for f in fruits if f.localised]
     order = harvest_order(localised, world.p_world_camera, cam.focal_px, cam.width_px, cam.height_px)
     by_id = {f.id: f for f in localised}
     visits = []
+    on_step = None if recorder is None else recorder.on_step
+    if recorder is not None:
+        recorder.on_order(order)
     for k, tid in enumerate(order):
-        visits.append(_visit(world, by_id[tid], localised, settings, info, k))
+        if recorder is not None:
+            recorder.on_visit(tid)
+        visits.append(_visit(world, by_id[tid], localised, settings, info, k, on_step))
+        if recorder is not None:
+            recorder.on_visited(visits[-1])
     return HarvestResult(tuple(order), tuple(visits))
 
 
@@ -123,7 +157,9 @@ def _visit(
     settings: Settings,
     info: SceneInfo,
     order: int,
+    on_step: Callable[[float], None] | None = None,
 ) -> Visit:
+    """Visit one fruit; ``on_step`` (a video's hook) sees every physics step of the move."""
     target = fruit.belief.centre_m
     d = settings.episode.approach_distance_m
     others = [f for f in fruits if f.id != fruit.id]
@@ -131,28 +167,47 @@ def _visit(
     rng = np.random.default_rng(fruit.id)
     base = _unit(world.p_world_camera - target)
     pose = None
+    spheres = _track_spheres(fruits)
+    blocked = False
     for yaw, el in ((0, 0), (20, 0), (-20, 0), (0, 20), (0, -20), (40, 0), (-40, 0), (0, 40)):
         p = target + d * _turn(base, math.radians(yaw), math.radians(el))
         if any(np.linalg.norm(p - f.belief.centre_m) < float(f.belief.mean[3]) + CLEARANCE_M for f in others):
             continue
         ik = look_at_ik(kin, p, target, world.q, rng, IkOptions(restarts=4))
-        if ik.success:
-            pose = (p, ik.q)
-            break
+        if not ik.success:
+            continue
+        if _path_clearance(world, world.q, ik.q, spheres) < PATH_CLEARANCE_M:
+            blocked = True
+            continue
+        pose = (p, ik.q)
+        break
     truths = np.array([f.centre_m for f in info.fruits])
     if pose is None:
         here = world.p_world_camera
-        reason = "no reachable pose clear of the other fruit"
+        reason = (
+            "every reachable pose's path passes too close to a fruit"
+            if blocked
+            else "no reachable pose clear of the other fruit"
+        )
         return Visit(
             fruit.id, order, False, float(np.linalg.norm(here - target)),
             float(np.min(np.linalg.norm(truths - here, axis=1))), math.inf, reason,
         )  # fmt: skip
     clearance = _Clearance(world, info)
-    world.set_step_hook(clearance.step)
+    hook: Callable[[float], None] = clearance.step
+    if on_step is not None:
+        recorded = on_step
+
+        def both(sim_time: float) -> None:
+            clearance.step(sim_time)
+            recorded(sim_time)
+
+        hook = both
+    world.set_step_hook(hook)
     try:
         world.move_camera(ViewPlan(pose[0], target, "optimal", True, 0.0, q=pose[1]))
     finally:
-        world.set_step_hook(None)
+        world.set_step_hook(on_step)
     here = world.kin.camera_pose(world.q)[0]
     clearance.step(0.0, force=True)
     settled = world.last.move is not None and world.last.move.settled
@@ -161,6 +216,44 @@ def _visit(
         float(np.min(np.linalg.norm(truths - here, axis=1))), clearance.least_m,
         None if settled else "the arm did not settle at the pose",
     )  # fmt: skip
+
+
+def _track_spheres(fruits: Sequence[FruitState]) -> np.ndarray:
+    """(n, 4): every track's estimated centre and radius plus three σmax [m]."""
+    return np.array(
+        [[*f.belief.centre_m, float(f.belief.mean[3]) + 3.0 * f.belief.sigma_max_m] for f in fruits]
+    ).reshape(-1, 4)
+
+
+def _path_clearance(world: MujocoWorld, q_from: np.ndarray, q_to: np.ndarray, spheres: np.ndarray) -> float:
+    """The least distance between the arm's geoms and the ``spheres`` (n, 4: centre, radius)
+    over the straight joint-space path ``q_from`` → ``q_to`` (sampled), each arm geom taken
+    as its box (a cylinder as the box around it) [m]; negative: inside."""
+    if len(spheres) == 0:
+        return math.inf
+    m = world.model
+    data = mujoco.MjData(m)
+    data.qpos[:] = world.data.qpos
+    arm = _arm_geoms(m, world.kin.joint_names)
+    least = math.inf
+    for s in np.linspace(0.0, 1.0, _PATH_SAMPLES):
+        data.qpos[world.qpos_adr] = q_from + s * (np.asarray(q_to) - q_from)
+        mujoco.mj_kinematics(m, data)
+        for g in arm:
+            half = m.geom_size[g]
+            if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CYLINDER:
+                half = np.array([half[0], half[0], half[1]])
+            R = data.geom_xmat[g].reshape(3, 3)
+            local = (spheres[:, :3] - data.geom_xpos[g]) @ R  # centres in the geom's frame
+            outside = np.linalg.norm(local - np.clip(local, -half, half), axis=1)
+            least = min(least, float(np.min(outside - spheres[:, 3])))
+    return least
+
+
+def _arm_geoms(m: mujoco.MjModel, joint_names: Sequence[str]) -> list[int]:
+    """Every geom of the arm's bodies and their descendants."""
+    arm_bodies = {m.jnt_bodyid[m.joint(n).id] for n in joint_names}
+    return [g for g in range(m.ngeom) if _root_in(m, int(m.geom_bodyid[g]), arm_bodies)]
 
 
 class _Clearance:
@@ -174,8 +267,7 @@ class _Clearance:
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, fruit_geom_name(f.name)) for f in info.fruits
         ]
         self.fruit = [g for g in self.fruit if g >= 0]
-        arm_bodies = {m.jnt_bodyid[m.joint(n).id] for n in world.kin.joint_names}
-        self.arm = [g for g in range(m.ngeom) if _root_in(m, int(m.geom_bodyid[g]), arm_bodies)]
+        self.arm = _arm_geoms(m, world.kin.joint_names)
         self.least_m = math.inf
         self._n = 0
 

@@ -18,11 +18,13 @@ import numpy as np
 from bve_mj.config import Settings, settings_to_dict, with_overrides
 from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.view_correlation import ViewCorrelation
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.episode import EpisodeResult, StopRules, ViewRecord, run_episode
 from bve_mj.loop.faults import FaultyPlanner, FaultyWorld
 from bve_mj.loop.outcomes import Outcome
-from bve_mj.loop.start import detection_prior, start_episode, state_prior
+from bve_mj.loop.start import EpisodeStart, detection_prior, start_episode, state_prior
+from bve_mj.perception.protocol import Detector
 from bve_mj.planning.constraints import ConstraintName
 from bve_mj.planning.plan import Planner
 from bve_mj.robot import make_arm_planner
@@ -31,10 +33,12 @@ from bve_mj.sim.scene_model import Fruit, SceneInfo
 from bve_mj.sim.world import World
 
 __all__ = [
+    "EpisodeParts",
     "MujocoEpisode",
     "Recorder",
     "detection_prior",
     "episode_constraints",
+    "episode_parts",
     "episode_settings",
     "run_mujoco_episode",
     "state_prior",
@@ -229,12 +233,15 @@ def run_mujoco_episode(
     leaves: bool = True,
     recorder: Recorder | None = None,
     edit: Callable[[mujoco.MjSpec], None] | None = None,
+    detector: Detector | None = None,
 ) -> MujocoEpisode:
     """Build the seeded scene, start the arm at a ready pose, run the loop, return the log.
 
     ``target``/``distractors``/``leaves`` override the scene's draw (scripted scenarios).
     ``recorder`` records a video of the episode (closed by the caller); ``edit(spec)`` may
-    add to the scene before it is compiled (an occluding leaf, say).
+    add to the scene before it is compiled (an occluding leaf, say). ``detector`` measures
+    the fruit in each image instead of the one ``detector.kind`` names (your own, behind the
+    :class:`~bve_mj.perception.protocol.Detector` protocol: a box or mask adapter, say).
 
     It computes with one BLAS thread (:mod:`bve_mj.threads`), as the command line and every
     campaign worker do: the same settings and seed give the same episode in a Python
@@ -244,7 +251,7 @@ def run_mujoco_episode(
     from bve_mj.threads import one_blas_thread
 
     with one_blas_thread():
-        return _run(settings, seed, target, distractors, leaves, recorder, edit)
+        return _run(settings, seed, target, distractors, leaves, recorder, edit, detector)
 
 
 def _run(
@@ -255,20 +262,60 @@ def _run(
     leaves: bool,
     recorder: Recorder | None,
     edit: Callable[[mujoco.MjSpec], None] | None,
+    detector: Detector | None = None,
 ) -> MujocoEpisode:
     start = start_episode(episode_settings(settings), seed, target, distractors, leaves, edit)
-    s, kin, info, prior, noise = start.settings, start.kin, start.info, start.prior, start.noise
-    ep = s.episode
+    s, kin, info, prior = start.settings, start.kin, start.info, start.prior
     q_start = start.q_start
     if q_start is None:  # the fruit is out of the arm's reach: a clear outcome, not a crash
         return MujocoEpisode(
             EpisodeResult(start.cube, (), 0.0, Outcome.UNREACHABLE), info, s, seed, kin.home.copy()
         )
+    parts = episode_parts(start, q_start, recorder, detector=detector)
+    try:
+        on_view = None if recorder is None else recorder.on_view
+        result = run_episode(
+            parts.loop_world, parts.planner, prior, s.filter, s.episode.views, parts.stop, on_view,
+            parts.claims, parts.correlation,
+        )  # fmt: skip
+    finally:
+        parts.world.close()
+    return MujocoEpisode(result, info, s, seed, q_start)
+
+
+@dataclass
+class EpisodeParts:
+    """What a MuJoCo episode runs with, built from its start: the world (and, with faults
+    injected, the faulty world the loop sees), the planner with the arm's kinematics, the
+    stop rules, the claims and the view correlation of the calibrated noise."""
+
+    world: MujocoWorld
+    loop_world: World
+    planner: Planner
+    stop: StopRules
+    claims: Claims | None
+    correlation: tuple[ViewCorrelation, ViewCorrelation] | None
+
+
+def episode_parts(
+    start: EpisodeStart,
+    q_start: np.ndarray,
+    recorder: Recorder | None = None,
+    keep_images: bool = False,
+    *,
+    detector: Detector | None = None,
+) -> EpisodeParts:
+    """The world, planner, stop rules, claims and correlation of the episode ``start`` begins
+    (the arm at ``q_start``); ``recorder`` is attached to the world; ``keep_images``: the
+    world keeps the last eye-in-hand image (a recorder implies it); ``detector``: the world's
+    detector (None: the one ``detector.kind`` names)."""
+    s, kin, prior = start.settings, start.kin, start.prior
+    ep = s.episode
     world = MujocoWorld(
-        s, kin, start.model, info, q_start, prior.centre_m, np.random.default_rng(start.sensor_ss),
-        keep_images=recorder is not None,
+        s, kin, start.model, start.info, q_start, prior.centre_m, np.random.default_rng(start.sensor_ss),
+        keep_images=keep_images or recorder is not None,
         on_step=None if recorder is None else recorder.on_step,
-        noise=noise,
+        noise=start.noise, detector=detector,
     )  # fmt: skip
     if recorder is not None:
         recorder.attach(world, prior)
@@ -295,17 +342,10 @@ def _run(
             stall_m=ep.stall_m,
         )
     )
-    try:
-        on_view = None if recorder is None else recorder.on_view
-        claims, correlation = None, None
-        if world.noise is not None:
-            claims = Claims(
-                world.noise.centre_bias_cov(s.fruit.radius_m), INNOVATION_PRIOR_DOF, world.noise.refusal_scale
-            )
-            correlation = (world.noise.centre_correlation, world.noise.radius_correlation)
-        result = run_episode(
-            loop_world, planner, prior, s.filter, ep.views, stop, on_view, claims, correlation
+    claims, correlation = None, None
+    if world.noise is not None:
+        claims = Claims(
+            world.noise.centre_bias_cov(s.fruit.radius_m), INNOVATION_PRIOR_DOF, world.noise.refusal_scale
         )
-    finally:
-        world.close()
-    return MujocoEpisode(result, info, s, seed, q_start)
+        correlation = (world.noise.centre_correlation, world.noise.radius_correlation)
+    return EpisodeParts(world, loop_world, planner, stop, claims, correlation)

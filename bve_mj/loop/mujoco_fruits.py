@@ -15,8 +15,9 @@ a fruit's radius; a confirmed track matched to no fruit is a false track.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -28,17 +29,33 @@ from bve_mj.estimation.tracks import Tracker
 from bve_mj.estimation.view_correlation import new_view_share
 from bve_mj.estimation.visibility import visible_arc_deg
 from bve_mj.loop.claims import Claims
-from bve_mj.loop.every_fruit import FruitsResult, FruitState, run_every_fruit
-from bve_mj.loop.harvest import HarvestResult, harvest
+from bve_mj.loop.every_fruit import FruitsResult, FruitState, FruitsView, run_every_fruit
+from bve_mj.loop.harvest import HarvestResult, RecordsHarvest, harvest
 from bve_mj.loop.mujoco import INNOVATION_PRIOR_DOF, episode_constraints, episode_settings
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.loop.start import start_episode
-from bve_mj.planning.every_fruit import EveryFruitPlanner, FruitTarget, information_gain
+from bve_mj.planning.every_fruit import (
+    EveryFruitPlanner,
+    FruitTarget,
+    PatternPlanner,
+    PlansForEveryFruit,
+    information_gain,
+)
 from bve_mj.robot import make_arm_planner
 from bve_mj.sim.mujoco_world import MujocoWorld
 from bve_mj.sim.scene_model import RIPENESS, Fruit, SceneInfo
 
-__all__ = ["FruitMatch", "FruitsEpisode", "ripe_fruit_in_zone", "run_every_fruit_episode"]
+__all__ = ["FruitMatch", "FruitsEpisode", "RecordsFruits", "ripe_fruit_in_zone", "run_every_fruit_episode"]
+
+
+class RecordsFruits(RecordsHarvest, Protocol):
+    """What a video of an every-fruit episode (``bve_mj.reporting.fruits_video.FruitsRecorder``)
+    offers the episode: wired to the world with the true ripe fruit of the work zone, then
+    told every view (and, in approach mode, the harvest: :class:`RecordsHarvest`)."""
+
+    def attach(self, world: MujocoWorld, ripe: Sequence[Fruit], zone_centre_m: np.ndarray) -> None: ...
+
+    def on_view(self, view: FruitsView) -> None: ...
 
 
 def ripe_fruit_in_zone(info: SceneInfo, settings: Settings, zone_centre_m: np.ndarray) -> list[Fruit]:
@@ -90,12 +107,15 @@ class FruitsEpisode:
     def ripe(self) -> list[Fruit]:
         return ripe_fruit_in_zone(self.info, self.settings, self.zone_centre_m)
 
-    def matches(self) -> tuple[list[FruitMatch], list[FruitState], list[FruitState]]:
+    def matches(
+        self, states: tuple[FruitState, ...] | None = None
+    ) -> tuple[list[FruitMatch], list[FruitState], list[FruitState]]:
         """(a match per true ripe fruit, confirmed tracks on other fruit (less ripe or outside
-        the zone), confirmed tracks on no fruit: false tracks)."""
+        the zone), confirmed tracks on no fruit: false tracks), for the tracks ``states`` (by
+        default the episode's final ones)."""
         from scipy.optimize import linear_sum_assignment
 
-        tracks = [t for t in self.result.final if t.confirmed]
+        tracks = [t for t in (self.result.final if states is None else states) if t.confirmed]
         fruits = list(self.info.fruits)
         ripe = {f.name for f in self.ripe}
         if not tracks:
@@ -114,6 +134,17 @@ class FruitsEpisode:
         ]
         false = [t for i, t in enumerate(tracks) if i not in matched]
         return [FruitMatch(f, by_fruit.get(f.name)) for f in self.ripe], other, false
+
+    def views_to_localise(self, within_mm: float) -> int | None:
+        """How many views it took until every true ripe fruit of the zone had a localised
+        track within ``within_mm`` of it (None: never in this episode, or no ripe fruit)."""
+        if not self.ripe:
+            return None
+        for k, view in enumerate(self.result.views, start=1):
+            matches, _, _ = self.matches(view.fruits)
+            if all(m.localised_within(within_mm) for m in matches):
+                return k
+        return None
 
     def to_json(self) -> dict[str, Any]:
         """The ``--json`` document of ``--fruits all``: settings, seed, per view the tracks and
@@ -189,9 +220,14 @@ def _track_json(t: FruitState) -> dict[str, Any]:
     }
 
 
-def run_every_fruit_episode(settings: Settings, seed: int) -> FruitsEpisode:
+def run_every_fruit_episode(
+    settings: Settings, seed: int, recorder: RecordsFruits | None = None
+) -> FruitsEpisode:
     """Build the seeded scene, start the arm at the one-target episode's ready pose, localise
     every ripe fruit of the work zone, and (approach mode) visit each.
+
+    ``recorder`` records a video of the episode (closed by the caller); the episode is the
+    same with it as without.
 
     Raises:
         ConfigError: when the settings cannot localise every fruit (the camera measurement
@@ -209,10 +245,10 @@ def run_every_fruit_episode(settings: Settings, seed: int) -> FruitsEpisode:
     # approach mode visits the fruit afterwards
     search = episode_settings(with_overrides(settings, episode={"approach": False}))
     with one_blas_thread():
-        return _run(s, search, seed)
+        return _run(s, search, seed, recorder)
 
 
-def _run(s: Settings, search: Settings, seed: int) -> FruitsEpisode:
+def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | None = None) -> FruitsEpisode:
     start = start_episode(search, seed)
     kin, info, noise = start.kin, start.info, start.noise
     zone = start.prior.centre_m.copy()
@@ -227,8 +263,12 @@ def _run(s: Settings, search: Settings, seed: int) -> FruitsEpisode:
         start.q_start,
         zone,
         np.random.default_rng(start.sensor_ss),
+        keep_images=recorder is not None,
+        on_step=None if recorder is None else recorder.on_step,
         noise=noise,
     )
+    if recorder is not None:
+        recorder.attach(world, ripe_fruit_in_zone(info, s, zone), zone)
     f = cam.focal_px
     min_arc = s.detector.min_arc_deg
     corr = (noise.centre_correlation, noise.radius_correlation)
@@ -265,22 +305,26 @@ def _run(s: Settings, search: Settings, seed: int) -> FruitsEpisode:
         q = world.q_measured if world.q_measured is not None else q0
         return make_arm_planner(search, loss, names, kin, q, planner_rng)
 
-    planner = EveryFruitPlanner(make, gain, visible_from, s.tracking.candidates)
     fruit = s.fruit
     radius_prior = (fruit.radius_m, max(fruit.radius_m * fruit.radius_spread_rel / math.sqrt(3.0), 1e-5))
+    sd = s.tracking.zone_m / 2.0
+    zone_belief = Belief(np.r_[zone, radius_prior[0]], np.diag([sd**2] * 3 + [radius_prior[1] ** 2]))
+    planner: PlansForEveryFruit
+    if s.planner.kind == "bve":
+        planner = EveryFruitPlanner(make, gain, visible_from, s.tracking.candidates)
+    else:  # a baseline: one pattern for the whole zone
+        planner = PatternPlanner(make(), zone_belief)
     update = filter_update(s.filter.kind, s.filter.ekf_iterations)
     tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr)
     claims = Claims(noise.centre_bias_cov(fruit.radius_m), INNOVATION_PRIOR_DOF, noise.refusal_scale)
     try:
-        sd = s.tracking.zone_m / 2.0
-        zone_belief = Belief(np.r_[zone, radius_prior[0]], np.diag([sd**2] * 3 + [radius_prior[1] ** 2]))
         result = run_every_fruit(
             world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims,
-            zone=zone_belief,
+            on_view=None if recorder is None else recorder.on_view, zone=zone_belief,
         )  # fmt: skip
         visits = None
         if s.episode.approach and result.final:
-            visits = harvest(world, result.final, s, info)
+            visits = harvest(world, result.final, s, info, recorder)
     finally:
         world.close()
     return FruitsEpisode(result, info, s, seed, zone, visits)

@@ -75,7 +75,7 @@ class ArmKinematics:
         elif limit_set in robot.limit_sets:
             lower, upper = (np.array(x, dtype=float) for x in zip(*robot.limit_sets[limit_set], strict=True))
         else:
-            allowed = ", ".join(["urdf", *robot.limit_sets])
+            allowed = ", ".join(dict.fromkeys(["urdf", *robot.limit_sets]))
             raise ConfigError("robot.joint_limits", limit_set, f"one of {allowed} for {robot.name}")
         model.lowerPositionLimit[:] = lower
         model.upperPositionLimit[:] = upper
