@@ -180,3 +180,16 @@ def test_the_synthetic_world_refuses_the_radius_state_by_name(tmp_path, capsys):
     assert main(["paper", "--config", str(cfg), "--experiments", "E1", "--runs", "1"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "filter.state" in err
+
+
+def test_progress_is_a_tqdm_bar_on_stderr_and_silent_when_disabled(capsys):
+    from bve_mj.cli.args import progress_printer
+
+    report = progress_printer(True)
+    for done in range(4):
+        report(done, 3)
+    err = capsys.readouterr().err
+    assert "3/3" in err and "run" in err and "100%" in err
+    quiet = progress_printer(False)
+    quiet(1, 3)
+    assert capsys.readouterr().err == ""

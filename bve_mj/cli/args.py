@@ -6,8 +6,7 @@ import argparse
 import math
 import os
 import sys
-import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn, get_args
 
@@ -112,22 +111,25 @@ def check_output_path(name: str, path: str | None) -> Path | None:
     return p
 
 
-def progress_printer(enabled: bool) -> Any:
-    start = time.perf_counter()
+def progress_printer(enabled: bool) -> Callable[[int, int], None]:
+    """A progress callback ``report(done, total)`` drawing a tqdm bar on stderr (runs done,
+    rate, time left); nothing when ``enabled`` is false. A new total starts a new bar."""
+    bar: Any = None
 
     def report(done: int, total: int) -> None:
+        nonlocal bar
         if not enabled:
             return
-        width = 30
-        filled = int(width * done / total)
-        rate = done / max(time.perf_counter() - start, 1e-9)
-        eta = (total - done) / rate if rate > 0 else 0.0
-        sys.stderr.write(
-            f"\r  [{'#' * filled}{'.' * (width - filled)}] {done}/{total} runs, eta {eta:4.0f} s"
-        )
-        if done == total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        if bar is None or bar.total != total:
+            from tqdm import tqdm
+
+            if bar is not None:
+                bar.close()
+            bar = tqdm(total=total, unit="run", file=sys.stderr, dynamic_ncols=True, leave=True)
+        bar.update(max(0, done - bar.n))
+        if done >= total:
+            bar.close()
+            bar = None
 
     return report
 
