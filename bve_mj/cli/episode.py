@@ -65,6 +65,17 @@ def cmd_episode(args: argparse.Namespace) -> int:
 
         require_matplotlib("plots", args.plots)
     settings = episode_cli_settings(args)
+    viewer = bool(getattr(args, "viewer", False))
+    if viewer:
+        if video_path is not None:
+            raise ConfigError("viewer", "--viewer", "not with --video (one of them)")
+        if settings.tracking.fruits == "all":
+            raise ConfigError(
+                "viewer", "--viewer", "not with --fruits all (the one-target episode's, for now)"
+            )
+        from bve_mj.reporting.live_viewer import require_display
+
+        require_display()
     if settings.tracking.fruits == "all":
         from bve_mj.cli.fruits import run_every_fruit_cli
 
@@ -74,14 +85,19 @@ def cmd_episode(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from bve_mj.loop.mujoco import run_mujoco_episode
+    from bve_mj.loop.mujoco import Recorder, run_mujoco_episode
+    from bve_mj.reporting.live_viewer import LiveViewer
     from bve_mj.reporting.video import EpisodeRecorder
 
-    recorder = EpisodeRecorder(video_path) if video_path is not None else None
+    recorder: Recorder | None = None
+    if video_path is not None:
+        recorder = EpisodeRecorder(video_path)
+    elif viewer:
+        recorder = LiveViewer()
     try:
         result = run_mujoco_episode(settings, seed, recorder=recorder)
     finally:
-        frames = recorder.close() if recorder is not None else 0
+        frames = recorder.close() if isinstance(recorder, EpisodeRecorder | LiveViewer) else 0
     doc = result.to_json()
     s = result.settings
     e = s.episode

@@ -90,6 +90,11 @@ def build_parser() -> argparse.ArgumentParser:
     ep.add_argument("--approach", action="store_true", help="approach mode: end close to the fruit")
     ep.add_argument("--realistic", action="store_true", help="sensor realism on (noise, calibration error)")
     ep.add_argument("--video", default=None, help="write an mp4 of the approach path here")
+    ep.add_argument(
+        "--viewer",
+        action="store_true",
+        help="play the episode live in MuJoCo's viewer (needs a display; one target, not with --video)",
+    )
     ep.add_argument("--plots", default=None, help="write PREFIX_path.png and PREFIX_error.png")
     ep.add_argument("--json", default=None, help="write the episode log (settings, views, outcome) here")
     ep.add_argument("--quiet", action="store_true", help="print only the summary")
