@@ -149,3 +149,64 @@ def test_bad_robot_settings_are_named():
         get_robot("kuka")
     with pytest.raises(ConfigError, match=r"robot\.joint_limits"):
         ArmKinematics(get_robot("ur5"), "emanual")
+
+
+def test_image_roll_is_the_angle_from_the_worlds_up_about_the_optical_axis():
+    from bve_mj.robot.ik import image_roll_rad
+
+    for roll_deg in (0.0, 30.0, -75.0, 179.0):
+        a = math.radians(roll_deg)
+        # looking along world x, turned by `a` about it: left (y) = cos a ŷ + sin a ẑ
+        R = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(a), -math.sin(a)], [0.0, math.sin(a), math.cos(a)]])
+        tilt = pin.utils.rpyToMatrix(0.0, 0.4, 0.0)  # the axis 23° below the horizon: same roll
+        assert image_roll_rad(tilt @ R) == pytest.approx(a, abs=1e-9)
+    down = pin.utils.rpyToMatrix(0.0, math.pi / 2, 0.0)  # looking straight down: no up
+    assert image_roll_rad(down) is None
+
+
+def test_level_camera_turns_the_image_upright_holding_position_and_look_at(arm):
+    """From mid-range configurations of every arm, the free roll is turned upright (most to
+    within 5°), the camera's position and look-at held within the IK's tolerances, the joints
+    within their limits, and never a turn for the worse."""
+    from bve_mj.robot.ik import image_roll_rad, level_camera
+
+    kin, _ = arm
+    rng = np.random.default_rng(7)
+    lo, hi = kin.limits.lower, kin.limits.upper
+    before, after = [], []
+    while len(before) < 40:
+        q = lo + (hi - lo) * rng.uniform(0.25, 0.75, kin.nq)
+        p, R = kin.camera_pose(q)
+        roll = image_roll_rad(R)
+        if roll is None:
+            continue
+        q_level = level_camera(kin, q, p + 0.3 * R[:, 0])
+        p2, R2 = kin.camera_pose(q_level)
+        assert kin.within_limits(q_level)
+        assert np.linalg.norm(p2 - p) <= 1e-4
+        assert math.acos(min(1.0, R2[:, 0] @ R[:, 0])) <= 1e-3
+        roll2 = image_roll_rad(R2)
+        assert roll2 is not None and abs(roll2) <= abs(roll) + 1e-9
+        before.append(abs(roll))
+        after.append(abs(roll2))
+    assert np.median(before) > math.radians(30.0)  # the IK's free roll is arbitrary...
+    assert np.mean(np.array(after) <= math.radians(5.0)) >= 0.65  # ...and mostly turned upright
+
+
+def test_look_at_ik_upright_option(arm):
+    from bve_mj.robot import IkOptions
+    from bve_mj.robot.ik import image_roll_rad
+
+    kin, _ = arm
+    rng = np.random.default_rng(4)
+    lo, hi = kin.limits.lower, kin.limits.upper
+    rolls = {True: [], False: []}
+    for _ in range(20):
+        q = lo + (hi - lo) * rng.uniform(0.3, 0.7, kin.nq)
+        p, R = kin.camera_pose(q)
+        target = p + 0.3 * R[:, 0]
+        for upright in (True, False):
+            res = look_at_ik(kin, p, target, q, np.random.default_rng(0), IkOptions(upright=upright))
+            assert res.success and res.position_error_m <= 1e-4 and res.axis_error_rad <= 1e-3
+            rolls[upright].append(abs(image_roll_rad(kin.camera_pose(res.q)[1]) or 0.0))
+    assert np.median(rolls[True]) < 0.5 * np.median(rolls[False])

@@ -141,6 +141,16 @@ class PlannerConfig:
             "limits (0 = none: the arm then folds against its limits and approaches stall)"
         ),
     )
+    upright_weight: float = field(
+        default=0.0,
+        metadata=_why(
+            "with the arm: weight of a soft preference for an upright eye-in-hand image "
+            "(w(1 - cos roll) about the optical axis, 0.1 a good value; the ready pose, each plan "
+            "and each IK move then turn the roll upright as far as the look-at and a tenth of each "
+            "joint's range allow). 0 = roll left free: with the Manipulator-H upright views cost "
+            "some truss episodes their convergence (README, upright images)"
+        ),
+    )
     failed_view_width_deg: float = field(
         default=25.0,
         metadata=_why(
@@ -171,6 +181,7 @@ class PlannerConfig:
         _non_negative("planner", "approach_set_point", self.approach_set_point)
         _non_negative("planner", "max_eigenvalue_trace_weight", self.max_eigenvalue_trace_weight)
         _non_negative("planner", "joint_margin_weight", self.joint_margin_weight)
+        _non_negative("planner", "upright_weight", self.upright_weight)
         _positive_int("planner", "starts", self.starts, 1000)
         if not 0.0 <= _number("planner", "failed_view_width_deg", self.failed_view_width_deg) <= 90.0:
             raise ConfigError(

@@ -169,11 +169,12 @@ def _visit(
     pose = None
     spheres = _track_spheres(fruits)
     blocked = False
+    upright = settings.planner.upright_weight > 0.0
     for yaw, el in ((0, 0), (20, 0), (-20, 0), (0, 20), (0, -20), (40, 0), (-40, 0), (0, 40)):
         p = target + d * _turn(base, math.radians(yaw), math.radians(el))
         if any(np.linalg.norm(p - f.belief.centre_m) < float(f.belief.mean[3]) + CLEARANCE_M for f in others):
             continue
-        ik = look_at_ik(kin, p, target, world.q, rng, IkOptions(restarts=4))
+        ik = look_at_ik(kin, p, target, world.q, rng, IkOptions(restarts=4, upright=upright))
         if not ik.success:
             continue
         if _path_clearance(world, world.q, ik.q, spheres) < PATH_CLEARANCE_M:

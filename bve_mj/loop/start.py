@@ -20,6 +20,7 @@ from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.noise import NoiseModel, load_noise_model
 from bve_mj.geometry import ray_frame
 from bve_mj.robot import ArmKinematics, IkOptions, arm_kinematics, look_at_ik
+from bve_mj.robot.ik import image_roll_rad
 from bve_mj.sim.scene import build_scene
 from bve_mj.sim.scene_model import Fruit, SceneInfo
 
@@ -31,28 +32,34 @@ START_MARGIN = 0.15
 
 
 def _start_configuration(
-    kin: ArmKinematics, estimate: np.ndarray, distance: float, rng: np.random.Generator
-) -> np.ndarray:
+    kin: ArmKinematics, estimate: np.ndarray, distance: float, rng: np.random.Generator,
+    *, upright: bool = False,
+) -> np.ndarray:  # fmt: skip
     """A ready pose: the camera ``distance`` in front of the estimate (robot side), looking at it.
 
     Viewing directions are tried in order of preference; for each, look-at IK from home and
     from a few random configurations, keeping the solution farthest from the joint limits.
     The first direction whose best solution keeps every joint ``START_MARGIN`` of its range
-    from the limits wins (else the best seen). A pose folded against its limits strands the
-    planner, which moves the arm locally: seed 0's approach once stalled 0.127 m from the
-    fruit with three joints at their limits.
+    from the limits wins (else the best seen); among such solutions, the one whose image is
+    nearest upright with ``upright`` (the planner moves the arm locally and keeps the branch it starts in). A
+    pose folded against its limits strands the planner: seed 0's approach once stalled
+    0.127 m from the fruit with three joints at their limits.
     """
-    best: tuple[float, np.ndarray] | None = None
-    single = IkOptions(restarts=0)
+    best: tuple[tuple[float, float], np.ndarray] | None = None
+    single = IkOptions(restarts=0, upright=upright)
     for elevation in (0.15, 0.35, -0.1, 0.6, -0.3):
         for yaw in (0.0, 0.3, -0.3):
             d = np.array([-math.cos(yaw), math.sin(yaw), elevation])
             p = estimate + distance * d / np.linalg.norm(d)
             for seed in (kin.home, *(kin.random_configuration(rng) for _ in range(7))):
                 ik = look_at_ik(kin, p, estimate, seed, rng, single)
-                if ik.success and (best is None or kin.limit_margin(ik.q) > best[0]):
-                    best = (kin.limit_margin(ik.q), ik.q)
-            if best is not None and best[0] >= START_MARGIN:
+                if ik.success:
+                    margin = kin.limit_margin(ik.q)
+                    roll = image_roll_rad(kin.camera_pose(ik.q)[1]) or 0.0
+                    key = (min(margin, START_MARGIN), -abs(roll)) if upright else (margin, 0.0)
+                    if best is None or key > best[0]:
+                        best = (key, ik.q)
+            if best is not None and best[0][0] >= START_MARGIN:
                 return best[1]
     if best is None:
         raise PlanningError(f"no reachable ready pose looks at the estimate {estimate.round(3).tolist()}")
@@ -155,7 +162,9 @@ def start_episode(
     cube = Belief.isotropic(coarse, max(ep.initial_error_m / math.sqrt(3.0), 1e-3))
     streams = (sensor_ss, planner_ss, fault_ss)
     try:
-        q_start = _start_configuration(kin, coarse, s.band_distance_m, prior_rng)
+        q_start = _start_configuration(
+            kin, coarse, s.band_distance_m, prior_rng, upright=s.planner.upright_weight > 0.0
+        )
     except PlanningError:  # the fruit is out of the arm's reach: a clear outcome, not a crash
         return EpisodeStart(s, kin, model, info, None, cube, cube, noise, *streams)
     if ep.prior == "cube":

@@ -1,10 +1,18 @@
 """Look-at inverse kinematics: the camera at a given position with its optical axis through
-a given point, roll about the axis free, within joint limits.
+a given point, within joint limits, the image turned upright where the arm allows.
 
 Damped least squares (Levenberg-Marquardt) on the 6-vector residual
 r = [p(q) - p*; x(q) - d], x the optical axis, d = (target - p*)/‖target - p*‖; its
-Jacobian is [J_v; -[x]× J_ω]. Roll is free because x does not depend on it. Steps are
-clipped into the joint limits; restarts from random configurations when a start stalls.
+Jacobian is [J_v; -[x]× J_ω]. Roll about the axis is free because x does not depend on it.
+Steps are clipped into the joint limits; restarts from random configurations when a start
+stalls.
+
+With ``IkOptions.upright`` the free roll is then spent on an upright image
+(:func:`level_camera`): the camera turned
+about its optical axis, position and axis held, until the image's up (camera z) lies in the
+vertical plane through the axis, on the sky's side. A soft preference: a turn is taken only
+while the look-at holds within tolerance and no joint is pushed into the outer twentieth of its
+range; whatever cannot be turned stays as the look-at left it.
 """
 
 from __future__ import annotations
@@ -17,7 +25,7 @@ import numpy as np
 from bve_mj.geometry import skew
 from bve_mj.robot.kinematics import ArmKinematics
 
-__all__ = ["IkOptions", "IkResult", "look_at_ik"]
+__all__ = ["IkOptions", "IkResult", "image_roll_rad", "level_camera", "look_at_ik"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -29,6 +37,8 @@ class IkOptions:
     max_iterations: int = 100
     restarts: int = 20
     initial_damping: float = 1e-3
+    upright: bool = False
+    """Turn the image upright (:func:`level_camera`) once the look-at is solved."""
 
 
 @dataclass(frozen=True)
@@ -123,6 +133,73 @@ def look_at_ik(
             best_q, best_cost = q, cost
         pos_err, ang_err = _errors(kin, best_q, p_star, d)
         if pos_err <= opt.position_tol_m and ang_err <= opt.axis_tol_rad:
+            if opt.upright:
+                best_q = level_camera(kin, best_q, p_world_target, opt)
+                pos_err, ang_err = _errors(kin, best_q, p_star, d)
             return IkResult(best_q, True, pos_err, ang_err, total, starts)
     pos_err, ang_err = _errors(kin, best_q, p_star, d)
     return IkResult(best_q, False, pos_err, ang_err, total, starts)
+
+
+_NEAR_VERTICAL = 0.1
+"""Below this cos(elevation) of the optical axis (within ~6° of straight up or down) the
+image has no up to prefer: every roll is as good."""
+_LEVEL_TOL_RAD = math.radians(1.0)
+_LEVEL_STEP_RAD = 0.5  # the largest turn per linearised step
+_LEVEL_MARGIN = 0.1  # a turn may not push a joint into the outer tenth of its range (the barrier's band)
+_POLISH = IkOptions(max_iterations=30)
+
+
+def image_roll_rad(R_world_camera: np.ndarray) -> float | None:
+    """The image's roll: the angle about the optical axis from the world's up to the
+    image's up (camera z; 0 = upright, ±π = the floor at the top), positive when the
+    image's left edge (camera y) is raised; None when the optical axis is near vertical."""
+    up_z, left_z = float(R_world_camera[2, 2]), float(R_world_camera[2, 1])
+    if math.hypot(up_z, left_z) < _NEAR_VERTICAL:
+        return None
+    return math.atan2(left_z, up_z)
+
+
+def level_camera(
+    kin: ArmKinematics, q: np.ndarray, p_world_target: np.ndarray, options: IkOptions | None = None
+) -> np.ndarray:
+    """``q`` turned about the camera's optical axis towards an upright image, the camera's
+    position and its look at ``p_world_target`` held.
+
+    Each step asks for a turn of -roll (at most 0.5 rad) about the axis at zero camera
+    velocity (damped least squares on the 6×n camera Jacobian), clips into the joint
+    limits and re-solves the look-at from there. A step is kept only when the look-at holds
+    within ``options``' tolerances, the roll shrinks, and no joint enters the outer tenth of
+    its range (a twentieth) that was not already there; otherwise the best configuration so far is
+    returned (``q`` itself when no turn is possible: reachability first).
+    """
+    opt = options or IkOptions()
+    q_best = kin.clip(q)
+    p_star, R = kin.camera_pose(q_best)
+    u = np.asarray(p_world_target, dtype=float) - p_star
+    d = u / float(np.linalg.norm(u))
+    roll = image_roll_rad(R)
+    margin_floor = min(kin.limit_margin(q_best), _LEVEL_MARGIN)
+    polish = IkOptions(position_tol_m=opt.position_tol_m, axis_tol_rad=opt.axis_tol_rad,
+                       max_iterations=_POLISH.max_iterations)  # fmt: skip
+    eye = np.eye(kin.nq)
+    for _ in range(12):
+        if roll is None or abs(roll) <= _LEVEL_TOL_RAD:
+            break
+        p, R, J = kin.camera_pose_and_jacobian(q_best)
+        turn = -max(-_LEVEL_STEP_RAD, min(_LEVEL_STEP_RAD, roll))
+        twist = np.concatenate((p_star - p, turn * R[:, 0]))
+        step = np.linalg.solve(J.T @ J + 1e-6 * eye, J.T @ twist)
+        q_new, _, _ = _solve_from(kin, kin.clip(q_best + step), p_star, d, polish)
+        pos_err, ang_err = _errors(kin, q_new, p_star, d)
+        new_roll = image_roll_rad(kin.camera_pose(q_new)[1])
+        if (
+            pos_err > opt.position_tol_m
+            or ang_err > opt.axis_tol_rad
+            or new_roll is None
+            or abs(new_roll) >= abs(roll) - 1e-4
+            or kin.limit_margin(q_new) < margin_floor
+        ):
+            break
+        q_best, roll = q_new, new_roll
+    return q_best

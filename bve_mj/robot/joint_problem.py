@@ -12,7 +12,7 @@ import numpy as np
 import bve_mj.linalg as la
 from bve_mj.robot.kinematics import ArmKinematics
 
-__all__ = ["JointProblem", "LimitMargin"]
+__all__ = ["JointProblem", "LimitMargin", "UprightPreference"]
 
 
 @dataclass(frozen=True)
@@ -69,6 +69,36 @@ class LimitMargin:
     def __call__(self, q: np.ndarray) -> tuple[float, np.ndarray]:
         value, gradient = self.lazy(q)
         return value, gradient()
+
+
+@dataclass(frozen=True)
+class UprightPreference:
+    """A soft preference for an upright image: w·(1 - a/√(a² + b² + ε²)), a = z_C·ẑ and
+    b = y_C·ẑ the image's up and left axes' heights (camera z is the image's up), ε = 0.05.
+    Where the optical axis is not near vertical this is w·(1 - cos roll), roll the angle
+    about the optical axis from the world's up to the image's up: zero upright, 2w with the
+    floor at the top, whatever the axis' elevation (so it turns the camera about its axis
+    and does not pull the viewpoint up or down); it fades where the axis is near vertical
+    and no roll is better than another. Gradient: ∂a/∂q = J_ωᵀ(z_C × ẑ), ∂b/∂q = J_ωᵀ(y_C × ẑ)."""
+
+    weight: float
+    eps: float = 0.05
+
+    def lazy(self, R: np.ndarray, J: np.ndarray) -> tuple[float, Callable[[], np.ndarray]]:
+        """The preference at the camera rotation R (its 6×n Jacobian J) and a function that
+        computes its gradient (n,)."""
+        a, b = float(R[2, 2]), float(R[2, 1])
+        s = a * a + b * b + self.eps * self.eps
+        root = s**0.5
+        w = self.weight
+
+        def gradient() -> np.ndarray:
+            up, left = R[:, 2], R[:, 1]
+            da = J[3:].T @ np.array([up[1], -up[0], 0.0])  # up × ẑ
+            db = J[3:].T @ np.array([left[1], -left[0], 0.0])
+            return -w * ((s - a * a) * da - a * b * db) / (s * root)
+
+        return w * (1.0 - a / root), gradient
 
 
 @dataclass

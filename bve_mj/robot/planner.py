@@ -15,7 +15,9 @@ Two formulations (``RobotConfig.formulation``):
   not smooth at the edge of the reachable set); kept for comparison.
 
 Both return plans whose IK is verified: a plan flagged feasible has a configuration within
-the joint limits that puts the camera there looking at the estimate.
+the joint limits that puts the camera there looking at the estimate. The roll about the
+optical axis, which neither the loss nor the constraints see, is then turned towards an
+upright image (:func:`bve_mj.robot.ik.level_camera`).
 """
 
 from __future__ import annotations
@@ -38,14 +40,15 @@ from bve_mj.planning.bve import SEED_DIRECTIONS, BvePlanner
 from bve_mj.planning.constraints import Constraint, ConstraintName, StepLimit, max_violation
 from bve_mj.planning.plan import Planner, PlanStatus, ViewPlan
 from bve_mj.planning.slsqp import minimize_slsqp
-from bve_mj.robot.ik import IkOptions, IkResult, look_at_ik
-from bve_mj.robot.joint_problem import JointProblem, LimitMargin
+from bve_mj.robot.ik import IkOptions, IkResult, level_camera, look_at_ik
+from bve_mj.robot.joint_problem import JointProblem, LimitMargin, UprightPreference
 from bve_mj.robot.kinematics import ArmKinematics
 
 __all__ = ["KinematicBvePlanner", "Reachability", "make_arm_planner"]
 
 _AXIS_TOL_RAD = 1e-3
 _PLAN_IK = IkOptions(restarts=1, max_iterations=40)  # inside a plan the seed (current q) is close
+_LEVEL_IK = IkOptions(position_tol_m=1e-8, axis_tol_rad=1e-6)  # a plan's roll turned, its camera held
 
 
 @dataclass
@@ -125,6 +128,15 @@ class KinematicBvePlanner:
         """See :meth:`BvePlanner.note_fused_view`."""
         self._bve.note_fused_view(p_world_camera, p_world_target, restart=restart)
 
+    def _level(self, q: np.ndarray, k_hat: np.ndarray, keeps: Callable[[np.ndarray], bool]) -> np.ndarray:
+        """The roll neither the loss nor the constraints see, turned towards an upright
+        image (``planner.upright_weight`` > 0), the camera held to 10 nm; kept only where
+        ``keeps`` (the plan's own check) still accepts it."""
+        if self.settings.planner.upright_weight == 0.0:
+            return q
+        q_level = level_camera(self.kin, q, k_hat, _LEVEL_IK)
+        return q_level if keeps(q_level) else q
+
     # ------------------------------------------------------------------ plan
     def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
         t0 = time.perf_counter()
@@ -140,7 +152,8 @@ class KinematicBvePlanner:
 
     def _plan_cartesian(self, belief: Belief, c_now: np.ndarray, iteration: int, t0: float) -> ViewPlan:
         plan = self._bve.propose(belief, c_now, iteration)
-        ik = look_at_ik(self.kin, plan.p_world_camera, plan.p_world_target, self.q, self.rng, _PLAN_IK)
+        options = dataclasses.replace(_PLAN_IK, upright=self.settings.planner.upright_weight > 0.0)
+        ik = look_at_ik(self.kin, plan.p_world_camera, plan.p_world_target, self.q, self.rng, options)
         if ik.success:
             return dataclasses.replace(plan, plan_s=time.perf_counter() - t0, q=ik.q)
         # the optimiser's point is not reachable after all: stay where the arm is, flagged
@@ -159,12 +172,16 @@ class KinematicBvePlanner:
         bounds = list(zip(self.kin.limits.lower, self.kin.limits.upper, strict=True))
 
         margin = LimitMargin(self.kin, self.settings.planner.joint_margin_weight)
+        upright = UprightPreference(self.settings.planner.upright_weight)
 
         def f(q: np.ndarray) -> tuple[float, Callable[[], np.ndarray]]:  # gradient when asked
-            p, _, J = prob.at(q)
+            p, R, J = prob.at(q)
             v, g = objective.lazy(p)
             m, dm = margin.lazy(q)
-            return v + m, lambda: J[:3].T @ g() + dm()
+            if upright.weight == 0.0:
+                return v + m, lambda: J[:3].T @ g() + dm()
+            u, du = upright.lazy(R, J)
+            return v + m + u, lambda: J[:3].T @ g() + dm() + du()
 
         def ineq(q: np.ndarray) -> np.ndarray:  # SciPy: ≥ 0
             p, _, _ = prob.at(q)
@@ -217,9 +234,10 @@ class KinematicBvePlanner:
                 if best is None or value < best[0]:
                     best = (value, q)
         if best is not None:
-            p, _ = self.kin.camera_pose(best[1])
-            return ViewPlan(p, k_hat, "optimal", True, max_violation(every, p), best[0],
-                            iterations, time.perf_counter() - t0, best[1])  # fmt: skip
+            q = self._level(best[1], k_hat, lambda q: verify(q)[0])
+            p, _ = self.kin.camera_pose(q)
+            return ViewPlan(p, k_hat, "optimal", True, max_violation(every, p), f(q)[0],
+                            iterations, time.perf_counter() - t0, q)  # fmt: skip
         return self._restore(k_hat, task, step, c_now, t0, iterations)
 
     def _restore(
@@ -268,9 +286,22 @@ class KinematicBvePlanner:
         if not np.all(np.isfinite(q)) or step.value(p) > tol:  # the solver wandered: stay
             q = self.q
             p, _ = self.kin.camera_pose(q)
-        h = prob.look(q)
-        worst = max([1.0 - h[2], *(gi.value(p) for gi in task)])
-        ok = worst <= tol and math.acos(float(np.clip(h[2], -1.0, 1.0))) <= _AXIS_TOL_RAD
+
+        def judge(q: np.ndarray) -> tuple[bool, float]:
+            p, _ = self.kin.camera_pose(q)
+            h = prob.look(q)
+            worst = max([1.0 - h[2], *(gi.value(p) for gi in task)])
+            ok = worst <= tol and math.acos(float(np.clip(h[2], -1.0, 1.0))) <= _AXIS_TOL_RAD
+            return ok, worst
+
+        def keeps(q: np.ndarray) -> bool:
+            return judge(q)[0] and step.value(self.kin.camera_pose(q)[0]) <= tol
+
+        ok, worst = judge(q)
+        if ok:
+            q = self._level(q, k_hat, keeps)
+            p, _ = self.kin.camera_pose(q)
+            ok, worst = judge(q)
         status: PlanStatus = "best_feasible" if ok else "restoring"
         return ViewPlan(p, k_hat, status, ok, max(0.0, worst), float("nan"),
                         iterations + int(res.nit), time.perf_counter() - t0, q.copy())  # fmt: skip

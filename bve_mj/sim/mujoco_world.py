@@ -24,7 +24,7 @@ from bve_mj.estimation.tracks import Sighting
 from bve_mj.perception.detection import Detection, NoDetection, Prediction
 from bve_mj.perception.protocol import DetectionRequest, Detector, EveryFruitDetector, detector_from_settings
 from bve_mj.planning.plan import ViewPlan
-from bve_mj.robot.ik import look_at_ik
+from bve_mj.robot.ik import IkOptions, look_at_ik
 from bve_mj.robot.kinematics import ArmKinematics
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.controller import JointTrajectoryController, MoveReport
@@ -221,7 +221,8 @@ class MujocoWorld:
         t0 = time.perf_counter()
         q_target = plan.q
         if q_target is None:
-            ik = look_at_ik(self.kin, plan.p_world_camera, plan.p_world_target, self.q, self._rng)
+            upright = IkOptions(upright=self.settings.planner.upright_weight > 0.0)
+            ik = look_at_ik(self.kin, plan.p_world_camera, plan.p_world_target, self.q, self._rng, upright)
             q_target = ik.q if ik.success else None
             self.last.ik_failed = not ik.success
         t1 = time.perf_counter()
