@@ -46,7 +46,7 @@ def test_one_blas_thread_reaches_blas_loaded_after_a_light_import():
 
 
 LAYERS = [
-    {"errors", "threads", "linalg"},
+    {"errors", "threads", "linalg", "atomic"},
     {"config"},
     {"geometry"},
     {"estimation"},

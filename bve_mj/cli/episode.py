@@ -8,9 +8,9 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
+from bve_mj.atomic import write_json_atomic
 from bve_mj.cli.args import EXIT_NOT_LOCALISED, EXIT_OK, check_output_path, float_arg, given, int_arg
 from bve_mj.loop.outcomes import Outcome
-from bve_mj.reporting.atomic import write_json_atomic
 
 if TYPE_CHECKING:
     from bve_mj.config import Settings

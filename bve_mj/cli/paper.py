@@ -7,8 +7,8 @@ import sys
 import time
 from typing import TYPE_CHECKING
 
+from bve_mj.atomic import write_json_atomic
 from bve_mj.cli.args import EXIT_OK, check_output_path, given, int_arg, progress_printer
-from bve_mj.reporting.atomic import write_json_atomic
 from bve_mj.reporting.tables import format_table
 
 if TYPE_CHECKING:

@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast, get_args
 
+from bve_mj.atomic import write_json_atomic
 from bve_mj.cli.args import EXIT_FAILURE, EXIT_OK, check_output_path, int_arg, progress_printer
-from bve_mj.reporting.atomic import write_json_atomic
 
 __all__ = ["cmd_calibrate", "cmd_scenarios"]
 

@@ -1,6 +1,6 @@
-"""What results become: tables, plots, videos, the results page, and atomic writes.
+"""What results become: tables, plots, videos and the results page (written whole or not at
+all through :mod:`bve_mj.atomic`).
 
-- :mod:`.atomic`: files written whole or not at all.
 - :mod:`.campaign_report`: a campaign's CSV, summary JSON and plots.
 - :mod:`.plots`: figures (matplotlib, imported only when a figure is drawn).
 - :mod:`.video`: the approach video of an episode.

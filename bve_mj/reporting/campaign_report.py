@@ -15,12 +15,12 @@ from typing import Any
 
 import numpy as np
 
+from bve_mj.atomic import write_json_atomic, write_text_atomic
 from bve_mj.campaigns.runner import CampaignResult
 from bve_mj.campaigns.spec import Cell
 from bve_mj.config import settings_to_dict
 from bve_mj.config.experiments import PAPER_RESULTS
 from bve_mj.estimation.metrics import consistency_metrics, euclidean_metrics, paper_metrics
-from bve_mj.reporting.atomic import write_json_atomic, write_text_atomic
 
 __all__ = [
     "CSV_COLUMNS",

@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
+from bve_mj.atomic import atomic_path
 from bve_mj.errors import ConfigError
 from bve_mj.loop.episode import EpisodeResult
-from bve_mj.reporting.atomic import atomic_path
 
 __all__ = [
     "draw_path",

@@ -14,11 +14,11 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from bve_mj.atomic import write_text_atomic
 from bve_mj.campaigns.runner import CampaignResult, run_campaign
 from bve_mj.campaigns.scenarios import format_suite
 from bve_mj.campaigns.spec import MEASUREMENTS, PLANNERS, CampaignSpec
 from bve_mj.config import Settings
-from bve_mj.reporting.atomic import write_text_atomic
 from bve_mj.reporting.campaign_plots import plot_campaign
 from bve_mj.reporting.campaign_report import cell_summary, write_campaign_outputs
 from bve_mj.reporting.results_tables import (

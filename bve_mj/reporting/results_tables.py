@@ -12,11 +12,11 @@ from typing import Any
 
 import numpy as np
 
+from bve_mj.atomic import write_json_atomic
 from bve_mj.campaigns.scenarios import load_suite, run_suite, suite_json
 from bve_mj.campaigns.spec import Cell
 from bve_mj.config.experiments import EXPERIMENTS, PAPER_RESULTS
 from bve_mj.errors import ConfigError
-from bve_mj.reporting.atomic import write_json_atomic
 
 __all__ = ["PageOptions", "Summaries"]
 

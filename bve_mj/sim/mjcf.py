@@ -18,10 +18,8 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 import re
 import sys
-import tempfile
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from pathlib import Path, PurePosixPath
@@ -29,6 +27,7 @@ from pathlib import Path, PurePosixPath
 import mujoco
 import numpy as np
 
+from bve_mj.atomic import write_bytes_atomic
 from bve_mj.config import CameraConfig, Settings
 from bve_mj.errors import ConfigError
 from bve_mj.robot import ArmKinematics, arm_kinematics
@@ -153,7 +152,7 @@ def write_model_files(folder: str | Path | None = None) -> list[Path]:
     written = []
     for name, text in ((ARM_FILE, arm_xml()), (SCENE_FILE, scene_xml())):
         path = out / name
-        _write_atomic(path, text.encode("utf-8"))
+        write_bytes_atomic(path, text.encode("utf-8"))
         written.append(path)
     return written
 
@@ -221,16 +220,16 @@ def write_mjcf_folder(
     manifest = out / MANIFEST
     doc: dict[str, object] = {"written_by": "bve_mj", **(about or {})}
     # claim the old and the new files first: a write cut short leaves a folder the next run owns
-    _write_atomic(manifest, _manifest_text({**doc, "files": sorted(previous | set(files))}))
+    write_bytes_atomic(manifest, _manifest_text({**doc, "files": sorted(previous | set(files))}))
     written = []
     for rel, content in files.items():
         path = out / rel
         path.parent.mkdir(parents=True, exist_ok=True)
-        _write_atomic(path, content.read_bytes() if isinstance(content, Path) else content)
+        write_bytes_atomic(path, content.read_bytes() if isinstance(content, Path) else content)
         written.append(path)
     for rel in sorted(previous - set(files)):  # the previous scene's files this one does not use
         (out / rel).unlink(missing_ok=True)
-    _write_atomic(manifest, _manifest_text({**doc, "files": sorted(files)}))
+    write_bytes_atomic(manifest, _manifest_text({**doc, "files": sorted(files)}))
     for sub in sorted({Path(rel).parent for rel in previous - set(files)} - {Path(".")}, reverse=True):
         with contextlib.suppress(OSError):  # a sub-folder of the previous scene's, left empty
             (out / sub).rmdir()
@@ -304,21 +303,6 @@ def _unique(rel: str, used: set[str]) -> str:
 
 def _manifest_text(doc: dict[str, object]) -> bytes:
     return (json.dumps(doc, indent=2) + "\n").encode("utf-8")
-
-
-def _write_atomic(path: Path, content: bytes) -> None:
-    """Write beside ``path``, then rename over it: a reader never sees half a file."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(content)
-        mask = os.umask(0)  # mkstemp makes 0600; give the file the mode open() would
-        os.umask(mask)
-        os.chmod(tmp, 0o666 & ~mask)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -45,6 +45,15 @@ def jsonable(obj: Any) -> Any:
     raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")
 
 
+def write_bytes_atomic(path: str | Path, content: bytes) -> Path:
+    """Write ``content`` to ``path`` atomically; returns the path."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        f.write(content)
+        f.flush()
+        os.fsync(f.fileno())
+    return Path(path)
+
+
 def write_text_atomic(path: str | Path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically; returns the path."""
     with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
