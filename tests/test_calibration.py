@@ -11,7 +11,7 @@ from bve_mj.cli import main
 from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
 from bve_mj.estimation import Belief
-from bve_mj.estimation.noise import load_noise_model, measure
+from bve_mj.estimation.noise import FEATURES, load_noise_model, measure
 from bve_mj.estimation.noise_fit import fit_noise_model
 from bve_mj.geometry import camera_rotation
 from bve_mj.loop.claims import Claims
@@ -87,6 +87,28 @@ def test_the_fit_recovers_how_errors_grow_with_the_refusals(rng):
     assert fit_noise_model(flat, CameraConfig(), "test")[0].refusal_scale < 0.5
 
 
+@pytest.mark.parametrize("heavy", [False, True])
+def test_the_claims_tail_scale_holds_the_errors_tail(rng, heavy):
+    """Gaussian errors need no tail scale (κ² ≈ 1: 1.0-1.2 over seeds); errors where one
+    fruit in ten errs four times the rest, in every view of it, do (2.2-2.9): the variance
+    fitted over all fruits then holds the bulk and misses those fruits, and κ² grows until
+    the χ²₃ 99.9% ellipsoid holds 99.9% of the views' errors."""
+    rows = _synthetic_rows(rng, fruits=120, views=12)
+    if heavy:
+        out = []
+        for r in rows:
+            bias = -0.2 - 0.5 * r["radius_px"] / 100  # the fruit type's: only the spread grows
+            k = 4.0 if r["scene_seed"] % 10 == 0 else 1.0
+            out.append({**r, "err_u_px": k * r["err_u_px"], "err_v_px": k * r["err_v_px"],
+                        "err_alpha_px": bias + k * (r["err_alpha_px"] - bias)})  # fmt: skip
+        rows = out
+    model, _ = fit_noise_model(rows, CameraConfig(), "test")
+    if heavy:
+        assert model.tail_scale > 1.8
+    else:
+        assert 1.0 <= model.tail_scale < 1.4
+
+
 def test_a_view_of_the_wrong_fruit_is_a_gross_error_not_noise(rng):
     rows = _synthetic_rows(rng)
     clean, _ = fit_noise_model(rows, CameraConfig(), "test")
@@ -119,6 +141,7 @@ def test_the_shipped_model_loads_and_says_what_it_is():
     assert model.samples > 1000 and "bve-mj calibrate" in model.source
     assert model.radius_bias(60.0) < 0.0  # the mask sees the fruit smaller than it is
     assert model.refusal_scale > 0.0  # hard fruits (often refused) err more
+    assert model.tail_scale > 1.0  # the errors are heavy-tailed
 
 
 def test_a_model_file_from_before_the_refusal_scale_loads_with_none(tmp_path):
@@ -130,6 +153,38 @@ def test_a_model_file_from_before_the_refusal_scale_loads_with_none(tmp_path):
     path.write_text(json.dumps({**data, "refusal_scale": -1.0}))
     with pytest.raises(ConfigError, match="refusal_scale"):
         load_noise_model(str(path))
+
+
+def test_a_model_file_from_before_the_scale_neighbour_and_tail_terms_loads_without_them(tmp_path):
+    new = load_noise_model("default")
+    data = new.to_json()
+    old = {**data, "version": 2, "features": list(FEATURES[:4])}
+    old["centre_var_px2"], old["radius_var_px2"] = data["centre_var_px2"][:4], data["radius_var_px2"][:4]
+    del old["tail_scale"]
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps(old))
+    model = load_noise_model(str(path))
+    assert model.centre_var_px2 == (*new.centre_var_px2[:4], 0.0, 0.0) and model.tail_scale == 1.0
+    for bad in ({**data, "tail_scale": 0.5}, {**data, "features": ["floor", "scale"]}):
+        path.write_text(json.dumps(bad))
+        with pytest.raises(ConfigError, match="noise_model"):
+            load_noise_model(str(path))
+
+
+def test_the_planners_noise_of_a_view_not_taken_is_the_models():
+    """The BVE's variance a + b·T² of a whole fruit seen at apparent radius f·T is what the
+    noise model gives a detection of it with the typical fit: every term that grows with
+    the apparent radius (elongation, scale) included."""
+    from bve_mj.config.settings import load_settings
+    from bve_mj.planning.information import size_information
+
+    settings = load_settings("examples/scenarios/suite/plum.toml")
+    model, f = load_noise_model("default"), settings.camera.focal_px
+    info = size_information(settings)
+    for T in (0.05, 0.1, 0.2):
+        sc, sr = model.expected_sigmas_px(f * T, settings.fruit.shape_index)
+        assert math.sqrt(info.bearing_var[0] + info.bearing_var[1] * T**2) * f == pytest.approx(sc)
+        assert math.sqrt(info.size_var[0] + info.size_var[1] * T**2) * f == pytest.approx(sr)
 
 
 @pytest.mark.parametrize(
@@ -224,6 +279,8 @@ def test_claims_add_the_fruits_own_offset_and_scale_by_the_innovations():
     hard = Claims(offset, None, 0.8).claim(b, [], refused_share=0.5)
     np.testing.assert_allclose(hard.cov, plain.cov * math.exp(0.4))
     assert Claims(offset, None, 0.8).claim(b, []).cov[0, 0] == plain.cov[0, 0]
+    # heavy-tailed errors: κ² on all of it, last
+    np.testing.assert_allclose(Claims(offset, None, 0.8, 2.5).claim(b, [], 0.5).cov, hard.cov * 2.5)
 
 
 def test_converged_waits_for_enough_agreeing_views():

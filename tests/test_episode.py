@@ -111,14 +111,20 @@ def test_episode_cli_json_and_bad_input(tmp_path, capsys):
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
 def test_approach_arrives_or_says_why_not(seed):
-    """The default approach episode: within 0.1 m of the fruit, or an outcome naming why not."""
+    """The default approach episode: within 0.1 m of the fruit, or an outcome naming why not
+    (the arm was blocked; or the fruit was measured in too few views to trust the estimate it
+    drove to: seed 4 since the claims hold the tail, where the first planned view saw only
+    80° of the fruit behind a leaf and no later one fitted it)."""
     s = with_overrides(Settings(), episode={"approach": True})
     ep = run_mujoco_episode(s, seed)
-    last = ep.result.views[-1]
+    last, outcome = ep.result.views[-1], ep.result.outcome
     gap = float(np.linalg.norm(last.p_world_camera - ep.result.final.centre_m))
-    assert ep.result.outcome in ("approached", "approach_blocked")
-    assert (gap <= s.episode.approach_distance_m) == (ep.result.outcome == "approached")
-    assert ep.final_error_mm < 2.0
+    assert outcome in ("approached", "approach_blocked", "unreliable")
+    if outcome == "unreliable":  # said, with the reason: fewer than two measurements
+        assert outcome.note and sum(v.accepted for v in ep.result.views) < 2
+    else:
+        assert (gap <= s.episode.approach_distance_m) == (outcome == "approached")
+        assert ep.final_error_mm < 2.0
     _check_joint_limits(ep)
 
 

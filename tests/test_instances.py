@@ -180,7 +180,7 @@ def test_touching_pairs_and_triples_are_measured_within_tolerance_or_refused(tru
     measurement; most measured."""
     probe, clusters = trusses
     counts = {"measured": 0, "refused": 0, "wrong": 0}
-    wrong, vague = [], []
+    wrong, vague, touched = [], [], []
     for name, fruits in clusters.items():
         target = fruits[0]
         for distance in (0.15, 0.25, 0.4):
@@ -199,8 +199,13 @@ def test_touching_pairs_and_triples_are_measured_within_tolerance_or_refused(tru
                         wrong.append((case, np.linalg.norm(det.centre_px - centre), det.radius_px / radius))
                     if isinstance(det, NoDetection) and not informative(det.reason):
                         vague.append((case, det.reason))
+                    if v == "measured":
+                        touched.append(det.neighbour_share)
     assert not wrong, wrong
     assert not vague, vague
+    # a ripe neighbour touches most of these targets' rims somewhere: the noise model's term
+    # (measured: every one touched, a fifth of the rim at the median, a third at the 90th %)
+    assert np.mean(np.array(touched) > 0.0) > 0.8 and 0.1 < np.median(touched) < 0.5
     total = sum(counts.values())
     assert total == 120
     assert counts["measured"] >= 0.85 * total, counts
@@ -298,6 +303,7 @@ def test_a_lone_red_sphere_keeps_its_accuracy(singles):
         img, centre, radius, (p, _) = singles.view(LONE, distance, rng.uniform(-30, 30), rng.uniform(-15, 25))
         det = detect(img, INTRINSICS, PRIOR, MEAS)
         assert verdict(det, centre, radius) == "measured", det
+        assert det.neighbour_share == 0.0  # nothing ripe around it
         # with the true radius the range is exact up to the pixel quantisation of the edge
         rho = np.linalg.norm(LONE.centre_m - p)
         assert det.range_m == pytest.approx(rho, rel=max(0.01, 1.0 / det.radius_px))

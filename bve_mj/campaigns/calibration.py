@@ -126,6 +126,7 @@ def sample_views(name: str, settings: Any, scene_seed: int, views: int) -> list[
                     radius_fit_px=det.radius_fit_px,
                     centre_jackknife_px=det.centre_jackknife_px,
                     radius_jackknife_px=det.radius_jackknife_px,
+                    neighbour_share=det.neighbour_share,
                     err_u_px=float(f * (a[1] / a[0] - t[1] / t[0])),
                     err_v_px=float(f * (a[2] / a[0] - t[2] / t[0])),
                     err_alpha_px=float(f * (det.angular_radius_rad - alpha_true)),
@@ -228,7 +229,7 @@ def calibrate(
             )
     names = ",".join(data.scenarios)
     source = f"bve-mj calibrate: scenarios {names}; {scenes} scenes x {views} views each, seed {seed}"
-    model, report = fit_noise_model(data.detections, camera, source)
+    model, report = fit_noise_model(data.rows, camera, source)  # the refusals fit the refusal scale
     report["views"] = len(data.rows)
     report["refused"] = len(data.rows) - len(data.detections)
     return model, report, data

@@ -163,9 +163,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     )
     for name, coef in (("centre", model.centre_var_px2), ("radius", model.radius_var_px2)):
         r = report[name]
-        terms = " + ".join(
-            f"{c:.4g}·{f}" for c, f in zip(coef, ("1", "fit²", "partial²", "elongation²"), strict=True)
-        )
+        names = ("1", "fit²", "partial²", "elongation²", "scale²", "neighbour²")
+        terms = " + ".join(f"{c:.4g}·{f}" for c, f in zip(coef, names, strict=True))
         print(
             f"{name:6} variance [px²] = {terms}; error rms {r['error_rms_px']:.3f} px, normalised rms "
             f"{r['z_rms']:.2f}, beyond 2σ {r['beyond_2sigma_pct']:.1f}% (Gaussian 4.6), beyond 3σ "
@@ -187,6 +186,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     print(
         f"a fruit the detector refuses errs more: variance × exp({model.refusal_scale:.2f} · refused share) "
         f"({report.get('refusal_fruits', 0)} fruits; scales the claimed covariance)"
+    )
+    print(
+        f"the errors are heavy-tailed: the claimed covariance × {model.tail_scale:.2f} holds 99.9% of the "
+        "views' errors in its 99.9% ellipsoid"
     )
     write_json_atomic(out, model.to_json())
     print(f'wrote {out} (wall {data.wall_s:.0f} s); use it with [measurement] noise_model = "{out}"')

@@ -12,12 +12,19 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaig
   coefficients fitted by maximum likelihood (:func:`fit_noise_model`), in px²:
 
   σ² = c_floor + c_fit · s_fit² + c_partial · ((1 - arc/360) · r_px / 10)²
-       + c_elongation · (max(k - 1, 0) · r_px / 10)²
+       + c_elongation · (max(k - 1, 0) · r_px / 10)² + c_scale · (r_px / 100)²
+       + c_neighbour · (n · r_px / 10)²
 
   with s_fit the fit's own 1σ (from its residuals and how much outline it saw), arc the
-  degrees of outline seen, r_px the apparent radius and k the fruit type's shape index
+  degrees of outline seen, r_px the apparent radius, k the fruit type's shape index
   (an elongated fruit, a plum, hangs tilted a little and its outline follows the spheroid
-  the fit assumes less well than a round or flattened one).
+  the fit assumes less well than a round or flattened one), and n the share of the fitted
+  circle's rim where a ripe neighbour touches or overlaps the fruit (red on red shows no
+  outline: the fit there rests on shading or on a neighbour's arc near the fruit's circle).
+  The scale term is the error that grows with the fruit's apparent size whatever the fit
+  sees: no real fruit is the spheroid the fit assumes, and its shading is not symmetric,
+  so a close view of a whole fruit still errs by a share of its radius, not by the sub-pixel
+  its residuals promise.
 
 - a part of the centre's error is **the fruit's own**, the same from every view: the
   silhouette of a real fruit (tilted, not quite a spheroid, shaded from above, a neighbour's
@@ -37,6 +44,10 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaig
   fruits' mean squared normalised error grows as exp(b · refused share) (``refusal_scale``
   b, fitted), and an episode's claimed covariance grows with it
   (:class:`bve_mj.loop.claims.Claims`).
+- the errors are **heavy-tailed**: beyond 3σ several times as often as a Gaussian's. The
+  claimed covariance is scaled by κ² (``tail_scale``, fitted) so that its 99.9% ellipsoid,
+  the one the scenario suite judges silent failures by, holds 99.9% of the calibration
+  views' errors; the filter itself fuses with the variances.
 
 The fitted model is a JSON file; the package ships one (``default``) and settings name it
 (``measurement.noise_model``). It holds the camera it was made with: a model for another
@@ -59,9 +70,10 @@ from bve_mj.estimation.view_correlation import ViewCorrelation
 
 __all__ = ["FEATURES", "NoiseModel", "load_noise_model", "measure"]
 
-FEATURES = ("floor", "fit", "partial", "elongation")
+FEATURES = ("floor", "fit", "partial", "elongation", "scale", "neighbour")
 
-"""The variance terms, in the order of the coefficients."""
+"""The variance terms, in the order of the coefficients. A model file from before the last
+two were added holds the first four: the others count 0 in it."""
 
 
 _KIND = "bve_mj detector noise model"
@@ -75,9 +87,9 @@ class NoiseModel:
     """Calibrated noise of the detector's centre and apparent radius [px].
 
     Attributes:
-        centre_var_px2: coefficients of the centre's variance per image coordinate, (4,), in
+        centre_var_px2: coefficients of the centre's variance per image coordinate, (6,), in
             the order of :data:`FEATURES`.
-        radius_var_px2: coefficients of the apparent radius' variance, (4,).
+        radius_var_px2: coefficients of the apparent radius' variance, (6,).
         radius_bias_px: the apparent radius' bias b0 + b1 · r_px / 100 [px], (2,).
         typical_fit_px: the median fit σ seen in calibration: what a planner expects of a
             view it has not taken yet [px].
@@ -91,6 +103,10 @@ class NoiseModel:
             directions (independent in a file that does not say).
         refusal_scale: b ≥ 0, a fruit's error variance against the share of its views the
             detector refused: × exp(b · share) (0 in a file that does not say).
+        tail_scale: κ² ≥ 1, how much a claimed covariance grows for its 99.9% ellipsoid to
+            hold 99.9% of the calibration views' errors: they are heavy-tailed, and a
+            Gaussian with their variance holds the bulk, not the tail (1 in a file that
+            does not say).
     """
 
     centre_var_px2: tuple[float, ...]
@@ -106,6 +122,7 @@ class NoiseModel:
     centre_correlation: ViewCorrelation = field(default_factory=ViewCorrelation)
     radius_correlation: ViewCorrelation = field(default_factory=ViewCorrelation)
     refusal_scale: float = 0.0
+    tail_scale: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("centre_var_px2", "radius_var_px2"):
@@ -122,6 +139,8 @@ class NoiseModel:
             raise ValueError("centre_bias_rel must be 2 finite numbers >= 0")
         if not (math.isfinite(self.refusal_scale) and self.refusal_scale >= 0.0):
             raise ValueError("refusal_scale must be a finite number >= 0")
+        if not (math.isfinite(self.tail_scale) and self.tail_scale >= 1.0):
+            raise ValueError("tail_scale must be a finite number >= 1")
 
     def centre_bias_cov(self, radius_m: float) -> np.ndarray:
         """The covariance [m²] (3, 3) of the fruit's own offset of the fitted centre, world frame
@@ -130,10 +149,14 @@ class NoiseModel:
         return np.diag([(h * radius_m) ** 2, (h * radius_m) ** 2, (v * radius_m) ** 2])
 
     @staticmethod
-    def features(radius_px: float, arc_deg: float, fit_px: float, shape_index: float) -> np.ndarray:
-        """The variance terms of :data:`FEATURES` for one view, (4,)."""
+    def features(
+        radius_px: float, arc_deg: float, fit_px: float, shape_index: float, neighbour_share: float = 0.0
+    ) -> np.ndarray:
+        """The variance terms of :data:`FEATURES` for one view, (6,)."""
         partial = max(0.0, 1.0 - arc_deg / 360.0) * radius_px / 10.0
-        return np.array([1.0, fit_px**2, partial**2, (max(shape_index - 1.0, 0.0) * radius_px / 10.0) ** 2])
+        elongation = max(shape_index - 1.0, 0.0) * radius_px / 10.0
+        neighbour = min(max(neighbour_share, 0.0), 1.0) * radius_px / 10.0
+        return np.array([1.0, fit_px**2, partial**2, elongation**2, (radius_px / 100.0) ** 2, neighbour**2])
 
     def radius_bias(self, radius_px: float) -> float:
         """How much smaller the detector sees the apparent radius than it is [px] (negative)."""
@@ -146,11 +169,13 @@ class NoiseModel:
         centre_fit_px: float,
         radius_fit_px: float,
         shape_index: float,
+        neighbour_share: float = 0.0,
     ) -> tuple[float, float]:
         """1σ of each image coordinate of the centre and of the apparent radius [px]."""
-        c = float(np.dot(self.centre_var_px2, self.features(radius_px, arc_deg, centre_fit_px, shape_index)))
-        r = float(np.dot(self.radius_var_px2, self.features(radius_px, arc_deg, radius_fit_px, shape_index)))
-        return math.sqrt(c), math.sqrt(r)
+        fc = self.features(radius_px, arc_deg, centre_fit_px, shape_index, neighbour_share)
+        fr = self.features(radius_px, arc_deg, radius_fit_px, shape_index, neighbour_share)
+        centre, radius = float(np.dot(self.centre_var_px2, fc)), float(np.dot(self.radius_var_px2, fr))
+        return math.sqrt(centre), math.sqrt(radius)
 
     def expected_sigmas_px(self, radius_px: float, shape_index: float) -> tuple[float, float]:
         """The σ a view of a whole fruit of apparent radius ``radius_px`` is expected to have
@@ -173,7 +198,7 @@ class NoiseModel:
 
     def to_json(self) -> dict[str, Any]:
         """The file's content (:func:`load_noise_model` reads it back)."""
-        return {"kind": _KIND, "version": 2, "features": list(FEATURES), **asdict(self)}
+        return {"kind": _KIND, "version": 3, "features": list(FEATURES), **asdict(self)}
 
 
 def _default_path() -> Path:
@@ -202,19 +227,22 @@ def load_noise_model(name: str = "default") -> NoiseModel:
         raise ConfigError(field, name, f"a JSON noise model file (line {exc.lineno}: {exc.msg})") from None
     if not isinstance(data, dict) or data.get("kind") != _KIND:
         raise ConfigError(field, name, "a noise model file written by bve-mj calibrate")
-    if data.get("features") != list(FEATURES):
+    terms = data.get("features")
+    if not isinstance(terms, list) or not terms or terms != list(FEATURES[: len(terms)]):
         raise ConfigError(field, name, f"a noise model with the terms {', '.join(FEATURES)}")
+    pad = (0.0,) * (len(FEATURES) - len(terms))  # an older file: the terms it lacks count 0
     keys = {f for f in NoiseModel.__dataclass_fields__}
     try:
         values = {k: data[k] for k in keys if k in data}
         return NoiseModel(
             **{
                 **values,
-                "centre_var_px2": tuple(float(x) for x in values["centre_var_px2"]),
-                "radius_var_px2": tuple(float(x) for x in values["radius_var_px2"]),
+                "centre_var_px2": (*(float(x) for x in values["centre_var_px2"]), *pad),
+                "radius_var_px2": (*(float(x) for x in values["radius_var_px2"]), *pad),
                 "radius_bias_px": tuple(float(x) for x in values["radius_bias_px"]),
                 "centre_bias_rel": tuple(float(x) for x in values["centre_bias_rel"]),
                 "refusal_scale": float(values.get("refusal_scale", 0.0)),
+                "tail_scale": float(values.get("tail_scale", 1.0)),
                 **{k: ViewCorrelation(**values[k]) for k in _CORRELATIONS if k in values},
             }
         )
@@ -237,7 +265,10 @@ def measure(
     if own is not None:
         z = np.array([a[1] / a[0], a[2] / a[0], det.angular_radius_rad])
         return z, np.array(own, dtype=float)
-    sc, sr = noise.sigmas_px(det.radius_px, det.arc_deg, det.centre_fit_px, det.radius_fit_px, shape_index)
+    sc, sr = noise.sigmas_px(
+        det.radius_px, det.arc_deg, det.centre_fit_px, det.radius_fit_px, shape_index,
+        getattr(det, "neighbour_share", 0.0),
+    )  # fmt: skip
     alpha = det.angular_radius_rad - noise.radius_bias(det.radius_px) / focal_px
     z = np.array([a[1] / a[0], a[2] / a[0], alpha])
     return z, np.diag([(sc / focal_px) ** 2, (sc / focal_px) ** 2, (sr / focal_px) ** 2])

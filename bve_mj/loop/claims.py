@@ -36,11 +36,15 @@ class Claims:
             which the innovations cannot show. Calibrated: :func:`bve_mj.estimation.noise_fit.
             fit_noise_model` fits b to the calibration fruits' errors against their refusal
             shares (``NoiseModel.refusal_scale``).
+        tail_scale: κ² ≥ 1, the claimed covariance's last factor: the detector's errors are
+            heavy-tailed, and κ² makes the claim's 99.9% ellipsoid hold 99.9% of a
+            calibration view's error, not only its variance (``NoiseModel.tail_scale``).
     """
 
     centre_offset_cov: np.ndarray | None = None
     innovation_prior_dof: float | None = None
     refusal_scale: float = 0.0
+    tail_scale: float = 1.0
 
     def scale(self, innovations: Sequence[tuple[float, int]]) -> float:
         """s² for these (NIS, dimension) pairs (1 without innovation scaling)."""
@@ -59,4 +63,4 @@ class Claims:
             cov[:3, :3] += np.asarray(self.centre_offset_cov, dtype=float)
         if self.refusal_scale > 0.0:
             cov *= math.exp(self.refusal_scale * min(max(refused_share, 0.0), 1.0))
-        return Belief(belief.mean, cov)
+        return Belief(belief.mean, cov * self.tail_scale)

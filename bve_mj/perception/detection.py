@@ -59,6 +59,8 @@ class Detection:
             outline it saw [px, as f·angle].
         centre_jackknife_px, radius_jackknife_px: the spread of the fits that leave one arc
             of the outline out (0 for a single arc) [px, as f·angle].
+        neighbour_share: the share of the fitted circle's rim where ripe colour goes on just
+            outside it: a ripe neighbour touching or overlapping the fruit there (0 alone).
         measurement_cov: the covariance (3, 3) [rad²] of z = (a_y/a_x, a_z/a_x, α) (bearing
             as normalised image coordinates, apparent angular radius) when the detector states
             its own noise (the box and mask adapters of :mod:`bve_mj.perception.adapters`);
@@ -82,6 +84,7 @@ class Detection:
     radius_fit_px: float = 0.0
     centre_jackknife_px: float = 0.0
     radius_jackknife_px: float = 0.0
+    neighbour_share: float = 0.0
     measurement_cov: np.ndarray | None = None
 
 

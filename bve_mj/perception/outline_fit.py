@@ -48,6 +48,25 @@ def measurable_fruit(
     return whole, part
 
 
+_RIM_SECTORS = 36
+
+
+def _neighbour_share(mask: np.ndarray, centre: np.ndarray, radius_px: float) -> float:
+    """The share of a fitted circle's rim where the ripe mask goes on just outside it (at
+    r + max(2 px, 8%), in 36 directions; outside the mask counts as not ripe): a ripe
+    neighbour touching or overlapping the fruit there. Red on red shows no outline, so
+    the fit there rests on shading or on a neighbour's arc near the fruit's circle: the
+    views that err most in a truss are those with much of the rim against a neighbour.
+    ``centre`` is in the mask's own pixels (pixel centres at +0.5)."""
+    rim = radius_px + max(2.0, 0.08 * radius_px)
+    t = (np.arange(_RIM_SECTORS) + 0.5) * (2.0 * math.pi / _RIM_SECTORS)
+    u = np.floor(centre[0] + rim * np.cos(t)).astype(int)
+    v = np.floor(centre[1] + rim * np.sin(t)).astype(int)
+    H, W = mask.shape
+    ok = (u >= 0) & (u < W) & (v >= 0) & (v < H)
+    return float(np.count_nonzero(mask[v[ok], u[ok]] > 0)) / _RIM_SECTORS
+
+
 def measure_outline(
     outline: FruitOutline,
     seen_deg: float,
@@ -191,6 +210,7 @@ def measure_outline(
         p_camera=rho * axis,
         cov_camera=cov,
         area_px=_area_inside(mask, centre - np.array([x0, y0]), radius_px),
+        neighbour_share=_neighbour_share(mask, centre - np.array([x0, y0]), radius_px),
         boundary_points=int(keep.sum()),
         trimmed_fraction=1.0 - float(keep.sum()) / max(outline_points, 1),
         arc_deg=arc,

@@ -342,12 +342,13 @@ def size_information(settings: Settings) -> SizeInformation:
 
     noise = load_noise_model(settings.measurement.noise_model)
     f = settings.camera.focal_px
-    elongation = max(settings.fruit.shape_index - 1.0, 0.0)
-    fit = noise.typical_fit_px
-    # σ² [px²] = a + b·r_px² with r_px = f·T: in rad², a/f² + b·T²
-    whole = np.array([1.0, fit**2, 0.0, 0.0])  # the floor and fit terms; nothing hidden
-    c0, c1 = float(np.dot(noise.centre_var_px2, whole)), noise.centre_var_px2[3] * (elongation / 10.0) ** 2
-    r0, r1 = float(np.dot(noise.radius_var_px2, whole)), noise.radius_var_px2[3] * (elongation / 10.0) ** 2
+    k = settings.fruit.shape_index
+    # a whole fruit, no neighbour: σ² [px²] = a + b·r_px² with r_px = f·T; in rad², a/f² + b·T²
+    # (a: the floor and the typical fit; b: the terms that grow with the apparent radius)
+    constant = noise.features(0.0, 360.0, noise.typical_fit_px, k)
+    per_r2 = noise.features(1.0, 360.0, 0.0, k) - noise.features(0.0, 360.0, 0.0, k)
+    c0, c1 = float(np.dot(noise.centre_var_px2, constant)), float(np.dot(noise.centre_var_px2, per_r2))
+    r0, r1 = float(np.dot(noise.radius_var_px2, constant)), float(np.dot(noise.radius_var_px2, per_r2))
     enc = (2.5 * settings.sensor.encoder_noise_rad) ** 2
     return SizeInformation(
         (c0 / f**2 + enc, float(c1)),
