@@ -3,7 +3,7 @@
     python benchmarks/bench_upright.py [--scenarios clean,truss_cluster] [--episodes 10] [--seed 4242]
 
 Runs one-target episodes of suite scenarios (episode ``i`` seeded as the suite seeds it) twice,
-with ``planner.upright_weight`` at 0.1 and at 0 (the default: the roll left free), and
+with ``planner.upright_weight`` at 0.1 (MuJoCo's default) and at 0 (the roll left free), and
 prints per scenario and setting: views, the image's |roll| at the views (the angle about the
 optical axis from the world's up to the image's up: 0 upright, 180 deg the floor at the top;
 views looking within ~6 deg of vertical have no up and are left out) as median, 90th

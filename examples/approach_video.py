@@ -1,6 +1,6 @@
 """An approach episode (paper eq. 13: localise while moving in) recorded as an mp4, plus a
 2x2 still of four moments of it (start, two midway, end) for the README. The arm keeps the
-eye-in-hand image upright where it can (``planner.upright_weight = 0.1``).
+eye-in-hand image upright where it can (``planner.upright_weight``, 0.1 in MuJoCo by default).
 
     python examples/approach_video.py [OUT_DIR] [SEED]
 
@@ -25,9 +25,7 @@ from bve_mj.reporting.video import EpisodeRecorder
 def main(out_dir: str = "out", seed: int = 1) -> None:
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     out = Path(out_dir) / "approach.mp4"
-    settings = with_overrides(
-        Settings(), episode={"approach": True, "views": 20}, planner={"upright_weight": 0.1}
-    )
+    settings = with_overrides(Settings(), episode={"approach": True, "views": 20})
     recorder = EpisodeRecorder(out)
     episode = run_mujoco_episode(settings, seed, recorder=recorder)
     frames = recorder.close()

@@ -36,6 +36,7 @@ def test_the_greenhouse_preset_is_what_the_closed_loop_used_before():
     assert g.measurement.reference_range_m == 0.30  # Σc at the band distance
     assert (g.measurement.kind, g.filter.state) == ("camera", "centre_radius")
     assert g.fruit == FruitPrior.for_scene(g.scene)  # the scene's fruit type
+    assert g.planner.upright_weight == 0.1  # eye-in-hand images turned upright where the arm allows
     assert episode_settings(Settings()) == g  # the closed loop runs exactly the preset
     assert Settings().for_world("mujoco") == g
 
@@ -50,11 +51,13 @@ def test_the_paper_preset_is_the_synthetic_protocol():
     assert p.filter.gate_probability is None  # off
     assert p.measurement.reference_range_m == 1.0
     assert (p.measurement.kind, p.filter.state) == ("range", "centre")
+    assert p.planner.upright_weight == 0.0  # E5/E10 plan as the paper does, roll free
     assert p == Settings().for_world("synthetic")
     # settings no world resolved read as the paper's (as measurement.kind = "auto" does)
     s = Settings()
     assert (s.band_distance_m, s.band_tolerance_m, s.step_m, s.reference_range_m) == (1.0, 0.1, 0.2, 1.0)
     assert (s.sigma_c_m2() == p.sigma_c_m2()).all()
+    assert s.planner.upright_weight is None and s.planner.upright == 0.0
 
 
 def test_approach_mode_adapts_the_greenhouse_preset_as_before():
@@ -81,12 +84,17 @@ def test_presets_are_written_once_and_resolving_twice_changes_nothing():
 
 def test_a_value_set_holds_in_both_worlds():
     s = settings_from_dict(
-        {"constraints": {"step_m": 0.15, "band_distance_m": 0.35}, "filter": {"gate_probability": 0.999}}
+        {
+            "constraints": {"step_m": 0.15, "band_distance_m": 0.35},
+            "filter": {"gate_probability": 0.999},
+            "planner": {"upright_weight": 0.0},
+        }
     )
     for world in ("synthetic", "mujoco"):
         r = s.for_world(world)
         assert (r.constraints.step_m, r.constraints.band_distance_m) == (0.15, 0.35)
         assert r.filter.gate_probability == 0.999
+        assert r.planner.upright_weight == 0.0
     assert s.for_world("mujoco").measurement.reference_range_m == 0.35  # follows the band
     assert s.for_world("synthetic").measurement.reference_range_m == 1.0  # the protocol's
     fixed = settings_from_dict({"measurement": {"reference_range_m": 0.5}})

@@ -141,14 +141,14 @@ class PlannerConfig:
             "limits (0 = none: the arm then folds against its limits and approaches stall)"
         ),
     )
-    upright_weight: float = field(
-        default=0.0,
+    upright_weight: float | None = field(
+        default=None,
         metadata=_why(
             "with the arm: weight of a soft preference for an upright eye-in-hand image "
-            "(w(1 - cos roll) about the optical axis, 0.1 a good value; the ready pose, each plan "
-            "and each IK move then turn the roll upright as far as the look-at and a tenth of each "
-            "joint's range allow). 0 = roll left free: with the Manipulator-H upright views cost "
-            "some truss episodes their convergence (README, upright images)"
+            "(w(1 - cos roll) about the optical axis; the ready pose, each plan and each IK move "
+            "then turn the roll upright as far as the look-at and a tenth of each joint's range "
+            "allow). 0 = roll left free. Unset: the world's preset: 0 in the paper's protocol "
+            "(its table unchanged), 0.1 in MuJoCo"
         ),
     )
     failed_view_width_deg: float = field(
@@ -172,6 +172,11 @@ class PlannerConfig:
         default=1e-7, metadata=_why("largest constraint value accepted as feasible", "m or m^2")
     )
 
+    @property
+    def upright(self) -> float:
+        """``upright_weight`` as a number (unset reads as the paper's world: 0)."""
+        return 0.0 if self.upright_weight is None else float(self.upright_weight)
+
     def __post_init__(self) -> None:
         _choice("planner", "kind", self.kind, PlannerKind)
         _choice("planner", "optimiser", self.optimiser, OptimiserName)
@@ -181,7 +186,8 @@ class PlannerConfig:
         _non_negative("planner", "approach_set_point", self.approach_set_point)
         _non_negative("planner", "max_eigenvalue_trace_weight", self.max_eigenvalue_trace_weight)
         _non_negative("planner", "joint_margin_weight", self.joint_margin_weight)
-        _non_negative("planner", "upright_weight", self.upright_weight)
+        if self.upright_weight is not None:
+            _non_negative("planner", "upright_weight", self.upright_weight)
         _positive_int("planner", "starts", self.starts, 1000)
         if not 0.0 <= _number("planner", "failed_view_width_deg", self.failed_view_width_deg) <= 90.0:
             raise ConfigError(

@@ -119,7 +119,8 @@ class Settings:
         - every setting left unset (``"auto"``, or ``None`` for a number) that the world's
           preset names takes its value from :data:`bve_mj.config.presets.PRESETS`:
           ``measurement.kind``, ``filter.state``, ``filter.gate_probability``, the distance band
-          and step limit of ``constraints``, ``measurement.reference_range_m``;
+          and step limit of ``constraints``, ``measurement.reference_range_m``,
+          ``planner.upright_weight``;
         - in MuJoCo, a ``fruit`` section left at its defaults (the paper's r_k = 35 mm ±15%)
           becomes the prior of the scene's fruit type (:meth:`FruitPrior.for_scene`): the
           estimator knows the variety it is picking, not each fruit's size. Any value set in
@@ -159,6 +160,10 @@ class Settings:
                 gate_probability=p.gate_probability if f.gate_probability is None else f.gate_probability,
             ),
         )
+        if self.planner.upright_weight is None:
+            out = dataclasses.replace(
+                out, planner=dataclasses.replace(self.planner, upright_weight=p.upright_weight)
+            )
         if world == "mujoco" and self.fruit == FruitPrior():
             out = dataclasses.replace(out, fruit=FruitPrior.for_scene(self.scene))
         return out

@@ -169,7 +169,7 @@ def _visit(
     pose = None
     spheres = _track_spheres(fruits)
     blocked = False
-    upright = settings.planner.upright_weight > 0.0
+    upright = settings.planner.upright > 0.0
     for yaw, el in ((0, 0), (20, 0), (-20, 0), (0, 20), (0, -20), (40, 0), (-40, 0), (0, 40)):
         p = target + d * _turn(base, math.radians(yaw), math.radians(el))
         if any(np.linalg.norm(p - f.belief.centre_m) < float(f.belief.mean[3]) + CLEARANCE_M for f in others):

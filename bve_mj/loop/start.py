@@ -163,7 +163,7 @@ def start_episode(
     streams = (sensor_ss, planner_ss, fault_ss)
     try:
         q_start = _start_configuration(
-            kin, coarse, s.band_distance_m, prior_rng, upright=s.planner.upright_weight > 0.0
+            kin, coarse, s.band_distance_m, prior_rng, upright=s.planner.upright > 0.0
         )
     except PlanningError:  # the fruit is out of the arm's reach: a clear outcome, not a crash
         return EpisodeStart(s, kin, model, info, None, cube, cube, noise, *streams)

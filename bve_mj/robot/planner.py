@@ -132,7 +132,7 @@ class KinematicBvePlanner:
         """The roll neither the loss nor the constraints see, turned towards an upright
         image (``planner.upright_weight`` > 0), the camera held to 10 nm; kept only where
         ``keeps`` (the plan's own check) still accepts it."""
-        if self.settings.planner.upright_weight == 0.0:
+        if self.settings.planner.upright == 0.0:
             return q
         q_level = level_camera(self.kin, q, k_hat, _LEVEL_IK)
         return q_level if keeps(q_level) else q
@@ -152,7 +152,7 @@ class KinematicBvePlanner:
 
     def _plan_cartesian(self, belief: Belief, c_now: np.ndarray, iteration: int, t0: float) -> ViewPlan:
         plan = self._bve.propose(belief, c_now, iteration)
-        options = dataclasses.replace(_PLAN_IK, upright=self.settings.planner.upright_weight > 0.0)
+        options = dataclasses.replace(_PLAN_IK, upright=self.settings.planner.upright > 0.0)
         ik = look_at_ik(self.kin, plan.p_world_camera, plan.p_world_target, self.q, self.rng, options)
         if ik.success:
             return dataclasses.replace(plan, plan_s=time.perf_counter() - t0, q=ik.q)
@@ -172,7 +172,7 @@ class KinematicBvePlanner:
         bounds = list(zip(self.kin.limits.lower, self.kin.limits.upper, strict=True))
 
         margin = LimitMargin(self.kin, self.settings.planner.joint_margin_weight)
-        upright = UprightPreference(self.settings.planner.upright_weight)
+        upright = UprightPreference(self.settings.planner.upright)
 
         def f(q: np.ndarray) -> tuple[float, Callable[[], np.ndarray]]:  # gradient when asked
             p, R, J = prob.at(q)

@@ -221,7 +221,7 @@ class MujocoWorld:
         t0 = time.perf_counter()
         q_target = plan.q
         if q_target is None:
-            upright = IkOptions(upright=self.settings.planner.upright_weight > 0.0)
+            upright = IkOptions(upright=self.settings.planner.upright > 0.0)
             ik = look_at_ik(self.kin, plan.p_world_camera, plan.p_world_target, self.q, self._rng, upright)
             q_target = ik.q if ik.success else None
             self.last.ik_failed = not ik.success
