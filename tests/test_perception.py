@@ -11,7 +11,7 @@ from bve_mj.geometry import camera_rotation
 from bve_mj.perception import Detection, Intrinsics, NoDetection, detect
 from bve_mj.robot import ArmKinematics, get_robot, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
-from bve_mj.sim.render import OffscreenRenderer
+from bve_mj.sim.render import OffscreenRenderer, RenderError
 from bve_mj.sim.scene import build_scene, set_probe_pose
 from bve_mj.sim.scene_model import PROBE_CAMERA, Fruit
 from bve_mj.sim.sensors import calibrated_intrinsics, noisy_image
@@ -270,3 +270,38 @@ def test_the_arc_jackknife_flags_an_arc_that_is_not_the_fruits():
             assert lat < 1e-9 and d_alpha < 1e-9
         # one arc alone: nothing to compare
         assert _arc_jackknife(rays, keep, np.zeros(len(rays), int), 12) == (0.0, 0.0)
+
+
+def test_a_renderer_without_shadows_skips_the_shadow_map_and_draws_the_same(kin):
+    """Without shadows the context has no shadow map; the image is the one a context with the
+    map draws with shadows off, to the bit; the model keeps its ``shadowsize``."""
+    probe = Probe(kin, seed=3)
+    target = probe.info.target.centre_m
+    image, _ = probe.look(target + np.array([-0.3, 0.05, 0.08]), target)
+    assert probe.renderer._ctx.shadowSize == 0
+    assert probe.model.vis.quality.shadowsize == 4096
+    mapped = OffscreenRenderer(probe.model, CAMERA.width_px, CAMERA.height_px, hidden_groups=(2,),
+                               blur_sigma_px=CAMERA.blur_sigma_px, shadows=True)  # fmt: skip
+    assert mapped._ctx.shadowSize == 4096
+    mapped._scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False
+    assert np.array_equal(mapped.render(probe.data, PROBE_CAMERA), image)
+    mapped.close()
+
+
+def test_renderers_sharing_a_gl_context_draw_their_own_scenes(kin):
+    """Renderers of one thread share a GL context: interleaved, each draws its own model into
+    its own buffer, and closing one leaves the other drawing the same image."""
+    a, b = Probe(kin, seed=3), Probe(kin, seed=4)
+    assert a.renderer._gl is b.renderer._gl
+    views = []
+    for probe in (a, b):
+        target = probe.info.target.centre_m
+        views.append((target + np.array([-0.3, 0.05, 0.08]), target))
+    first_a, _ = a.look(*views[0])
+    first_b, _ = b.look(*views[1])
+    assert not np.array_equal(first_a, first_b)
+    assert np.array_equal(a.look(*views[0])[0], first_a)
+    a.renderer.close()
+    assert np.array_equal(b.look(*views[1])[0], first_b)
+    with pytest.raises(RenderError, match="closed"):
+        a.look(*views[0])

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cache
 
 import numpy as np
 
@@ -134,20 +135,28 @@ def tube(points: np.ndarray, radii: np.ndarray | float, sides: int = 6) -> tuple
     normal = _cross(tangent[0], ref)
     normal /= np.linalg.norm(normal)
     theta = np.arange(sides) * 2.0 * math.pi / sides
+    cos_t, sin_t = np.cos(theta)[:, None], np.sin(theta)[:, None]
     rings = []
     for i in range(len(p)):  # parallel transport of the normal along the curve
         normal = normal - (normal @ tangent[i]) * tangent[i]
         normal /= np.linalg.norm(normal)
         binormal = _cross(tangent[i], normal)
-        rings.append(p[i] + r[i] * (np.cos(theta)[:, None] * normal + np.sin(theta)[:, None] * binormal))
-    verts = np.concatenate(rings)
+        rings.append(p[i] + r[i] * (cos_t * normal + sin_t * binormal))
+    return np.concatenate(rings), _tube_faces(len(p), sides)
+
+
+@cache
+def _tube_faces(rings: int, sides: int) -> np.ndarray:
+    """The triangles joining ``rings`` rings of ``sides`` vertices (read-only, shared)."""
     faces = []
-    for i in range(len(p) - 1):
+    for i in range(rings - 1):
         for j in range(sides):
             a, b = i * sides + j, i * sides + (j + 1) % sides
             c, d = b + sides, a + sides
             faces += [(a, b, c), (a, c, d)]
-    return verts, np.array(faces)
+    out = np.array(faces)
+    out.flags.writeable = False
+    return out
 
 
 def _two_sided(
@@ -183,20 +192,25 @@ def leaflet(
     half = 0.5 * width * np.sin(math.pi * t**0.75) ** 0.8
     half *= 1.0 - serration * (np.arange(segments + 1) % 2)
     rib_drop = -droop * length * t**2
-    pts = []
-    for sign in (0.0, 1.0, -1.0):
-        along = length * t + (0.04 * length * (sign != 0.0))
-        lateral = sign * half
-        height = rib_drop - math.tan(fold) * half * abs(sign)
-        pts.append(base + np.outer(along, u) + np.outer(lateral, v) + np.outer(height, w))
-    mid, left, right = pts  # left: +v
-    verts = np.vstack([mid, left, right])
+    sign = np.array([0.0, 1.0, -1.0])[:, None]  # the midrib, the left (+v) and right edges
+    along = length * t + (0.04 * length * (sign != 0.0))
+    lateral = sign * half
+    height = rib_drop - math.tan(fold) * half * np.abs(sign)
+    pts = base + along[..., None] * u + lateral[..., None] * v + height[..., None] * w
+    return _two_sided(pts.reshape(-1, 3), _leaflet_faces(segments), w, 0.0004)
+
+
+@cache
+def _leaflet_faces(segments: int) -> np.ndarray:
+    """The top triangles of a leaflet of ``segments`` spans (read-only, shared)."""
     n = segments + 1
     faces = []
     for k in range(segments):
         m0, m1, l0, l1, r0, r1 = k, k + 1, n + k, n + k + 1, 2 * n + k, 2 * n + k + 1
         faces += [(m0, m1, l1), (m0, l1, l0), (m0, r1, m1), (m0, r0, r1)]
-    return _two_sided(verts, np.array(faces), w, 0.0004)
+    out = np.array(faces)
+    out.flags.writeable = False
+    return out
 
 
 def calyx(
