@@ -75,3 +75,13 @@ def test_belief_validates():
         Belief(np.array([np.nan, 0, 0]), np.eye(3))
     with pytest.raises(EstimationError):
         Belief(np.zeros(2), np.eye(3))
+
+
+def test_chi2_quantile_is_scipy_stats_to_the_bit():
+    from scipy.stats import chi2
+
+    from bve_mj.estimation.metrics import chi2_quantile
+
+    p = np.array([0.001, 0.025, 0.5, 0.9, 0.95, 0.97, 0.99, 0.997, 0.999, 0.975])
+    for dof in (1, 2, 3, 4, 6, 7, 60, 3000):
+        assert np.array_equal(chi2_quantile(p, dof), chi2.ppf(p, dof)), dof

@@ -18,6 +18,7 @@ import numpy as np
 import bve_mj.linalg as la
 from bve_mj.errors import EstimationError
 from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.metrics import chi2_quantile
 from bve_mj.estimation.models import MeasurementModel
 
 __all__ = ["UpdateResult", "gain", "nis_threshold", "predict", "update"]
@@ -55,9 +56,7 @@ def predict(belief: Belief, Q: np.ndarray) -> Belief:
 @lru_cache(maxsize=64)
 def nis_threshold(probability: float, dof: int) -> float:
     """Chi-square quantile: the NIS gate for a measurement of ``dof`` components."""
-    from scipy.stats import chi2
-
-    return float(chi2.ppf(probability, dof))
+    return float(chi2_quantile(probability, dof))
 
 
 def gain(S: np.ndarray, HP: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:

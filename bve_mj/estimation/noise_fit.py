@@ -264,7 +264,7 @@ def _tail_scale(
     over all fruits says, the same way in every view of them, so a handful of views of one
     agree and do not average it out): a Gaussian with the right variance holds the bulk and
     misses the tail; the claim is scaled to hold the tail."""
-    from scipy.stats import chi2
+    from bve_mj.estimation.metrics import chi2_quantile
 
     refused_of: dict[tuple[Any, Any], list[bool]] = {}
     for r in [*kept, *refused]:
@@ -284,7 +284,7 @@ def _tail_scale(
         z2.append((float(e @ np.linalg.solve(lateral, e)) + (ea / sr) ** 2) / scale)
     if len(z2) < 100:
         return 1.0
-    ratio = float(np.quantile(z2, TAIL_PROBABILITY)) / float(chi2.ppf(TAIL_PROBABILITY, 3))
+    ratio = float(np.quantile(z2, TAIL_PROBABILITY)) / float(chi2_quantile(TAIL_PROBABILITY, 3))
     return max(1.0, ratio)
 
 
