@@ -79,14 +79,13 @@ def _solve_from(
     iterations = 0
     eye = np.eye(kin.nq)
     Jr = np.empty((6, kin.nq))  # [J_v; -[x]× J_ω], refilled in place each iteration
-    lower, upper = kin.limits.lower, kin.limits.upper
     while iterations < opt.max_iterations:
         iterations += 1
         Jr[:3] = J[:3]
         np.matmul(-skew(R[:, 0]), J[3:], out=Jr[3:])
         g = Jr.T @ r
         step = np.linalg.solve(Jr.T @ Jr + lam * eye, -g)
-        q_new = np.minimum(np.maximum(q + step, lower), upper)
+        q_new = kin.clip(q + step)
         p_n, R_n, J_n = kin.camera_pose_and_jacobian(q_new)
         r_n = np.concatenate((p_n - p_star, R_n[:, 0] - d))
         cost_n = float(r_n @ r_n)
