@@ -283,6 +283,19 @@ def test_claims_add_the_fruits_own_offset_and_scale_by_the_innovations():
     np.testing.assert_allclose(Claims(offset, None, 0.8, 2.5).claim(b, [], 0.5).cov, hard.cov * 2.5)
 
 
+def test_claims_of_the_detector_carry_its_calibration():
+    from bve_mj.estimation.noise import load_noise_model
+
+    noise = load_noise_model("default")
+    c = Claims.of_detector(noise, 0.03, 6.0)
+    np.testing.assert_array_equal(c.centre_offset_cov, noise.centre_bias_cov(0.03))
+    assert (c.innovation_prior_dof, c.refusal_scale, c.tail_scale) == (
+        6.0,
+        noise.refusal_scale,
+        noise.tail_scale,
+    )
+
+
 def test_converged_waits_for_enough_agreeing_views():
     tight = Belief(np.zeros(3), np.eye(3) * 1e-8)
     rules = StopRules(sigma_m=0.0015, min_accepted=3)

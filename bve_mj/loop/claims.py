@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bve_mj.estimation import Belief
+from bve_mj.estimation.noise import NoiseModel
 
 __all__ = ["Claims"]
 
@@ -45,6 +46,14 @@ class Claims:
     innovation_prior_dof: float | None = None
     refusal_scale: float = 0.0
     tail_scale: float = 1.0
+
+    @classmethod
+    def of_detector(cls, noise: NoiseModel, fruit_radius_m: float, innovation_prior_dof: float) -> Claims:
+        """The claims of a fruit of ``fruit_radius_m`` measured by the calibrated detector
+        ``noise``: its centre offset, refusal scale and tail scale, with innovation scaling."""
+        return cls(
+            noise.centre_bias_cov(fruit_radius_m), innovation_prior_dof, noise.refusal_scale, noise.tail_scale
+        )
 
     def scale(self, innovations: Sequence[tuple[float, int]]) -> float:
         """s² for these (NIS, dimension) pairs (1 without innovation scaling)."""

@@ -344,9 +344,6 @@ def episode_parts(
     )
     claims, correlation = None, None
     if world.noise is not None:
-        claims = Claims(
-            world.noise.centre_bias_cov(s.fruit.radius_m), INNOVATION_PRIOR_DOF, world.noise.refusal_scale,
-            world.noise.tail_scale,
-        )  # fmt: skip
+        claims = Claims.of_detector(world.noise, s.fruit.radius_m, INNOVATION_PRIOR_DOF)
         correlation = (world.noise.centre_correlation, world.noise.radius_correlation)
     return EpisodeParts(world, loop_world, planner, stop, claims, correlation)

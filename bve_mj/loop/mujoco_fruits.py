@@ -316,9 +316,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         planner = PatternPlanner(make(), zone_belief)
     update = filter_update(s.filter.kind, s.filter.ekf_iterations)
     tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr)
-    claims = Claims(
-        noise.centre_bias_cov(fruit.radius_m), INNOVATION_PRIOR_DOF, noise.refusal_scale, noise.tail_scale
-    )
+    claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF)
     try:
         result = run_every_fruit(
             world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims,

@@ -55,8 +55,11 @@ def _start_configuration(
                 ik = look_at_ik(kin, p, estimate, seed, rng, single)
                 if ik.success:
                     margin = kin.limit_margin(ik.q)
-                    roll = image_roll_rad(kin.camera_pose(ik.q)[1]) or 0.0
-                    key = (min(margin, START_MARGIN), -abs(roll)) if upright else (margin, 0.0)
+                    if upright:
+                        roll = image_roll_rad(kin.camera_pose(ik.q)[1]) or 0.0
+                        key = (min(margin, START_MARGIN), -abs(roll))
+                    else:
+                        key = (margin, 0.0)
                     if best is None or key > best[0]:
                         best = (key, ik.q)
             if best is not None and best[0][0] >= START_MARGIN:
