@@ -17,7 +17,14 @@ from bve_mj.config import CameraConfig, DetectorConfig, FruitPrior, MeasurementC
 from bve_mj.errors import ConfigError
 from bve_mj.geometry import camera_rotation
 from bve_mj.perception import Detection, Intrinsics, NoDetection, Prediction, detect, ripe_mask
-from bve_mj.perception.instances import concave_corners, group_arcs, hull_points, outline_arcs
+from bve_mj.perception.instances import (
+    Arc,
+    concave_corners,
+    group_arcs,
+    hull_points,
+    outline_arcs,
+)
+from bve_mj.perception.rims import interior_arcs, interior_edges
 from bve_mj.robot import ArmKinematics, get_robot
 from bve_mj.sim.render import OffscreenRenderer
 from bve_mj.sim.scene import build_scene, set_probe_pose
@@ -209,6 +216,35 @@ def test_touching_pairs_and_triples_are_measured_within_tolerance_or_refused(tru
     total = sum(counts.values())
     assert total == 120
     assert counts["measured"] >= 0.85 * total, counts
+
+
+def test_rims_over_ripe_neighbours_add_outline_and_measurements_never_wrong_ones(trusses):
+    """Rendered trusses, with and without the interior edges (a rim over a ripe neighbour):
+    with them the targets show more of their outline and more are measured, and none is
+    measured out of tolerance either way."""
+    probe, clusters = trusses
+    plain = DetectorConfig(interior_edge=0.0)
+    assert DetectorConfig().interior_edge > 0.0  # on by default
+    measured = {"with": 0, "without": 0}
+    arc_gain = []
+    for fruits in clusters.values():
+        target = fruits[0]
+        for distance in (0.15, 0.25):
+            for azimuth in (-30, 0, 30):
+                img, centre, radius, (p, R) = probe.view(target, distance, azimuth, 15)
+                predicted = INTRINSICS.project(R.T @ (target.centre_m + [0.003, -0.003, 0.003] - p))
+                dets = {
+                    "with": detect(img, INTRINSICS, PRIOR, MEAS, predicted_px=predicted),
+                    "without": detect(img, INTRINSICS, PRIOR, MEAS, plain, predicted_px=predicted),
+                }
+                for k, det in dets.items():
+                    v = verdict(det, centre, radius)
+                    assert v != "wrong", (k, fruits[0].name, distance, azimuth, det)
+                    measured[k] += v == "measured"
+                if all(isinstance(d, Detection) for d in dets.values()):
+                    arc_gain.append(dets["with"].arc_deg - dets["without"].arc_deg)
+    assert measured["with"] >= measured["without"], measured
+    assert np.mean(arc_gain) >= 10.0 and min(arc_gain) >= 0.0, arc_gain
 
 
 def test_a_merged_blob_is_never_one_fruit(trusses):
@@ -514,3 +550,65 @@ def test_hull_points_are_the_convex_silhouette_candidates():
     inner = np.column_stack((100 + 20 * np.cos(t[::10]), 100 + 20 * np.sin(t[::10])))
     on = hull_points(np.vstack((rim, inner)))
     assert on[: len(rim)].all() and not on[len(rim) :].any()
+
+
+def _shaded_discs(shape, discs):
+    """An RGB image of red discs (later ones in front), each shaded like a lit sphere: bright
+    at its centre, darker towards its limb, on a dark green background."""
+    img = np.zeros((*shape, 3), np.uint8)
+    img[:] = (20, 60, 20)
+    v, u = np.mgrid[0 : shape[0], 0 : shape[1]] + 0.5
+    for (x, y), r in discs:
+        d2 = ((u - x) ** 2 + (v - y) ** 2) / r**2
+        inside = d2 <= 1.0
+        bright = 90.0 + 150.0 * np.sqrt(np.clip(1.0 - d2, 0.0, 1.0))  # cos of the normal's tilt
+        img[inside] = np.stack((bright, 0.08 * bright, 0.08 * bright), axis=-1)[inside].astype(np.uint8)
+    return img
+
+
+def test_a_rim_over_a_ripe_neighbour_is_an_interior_edge_on_its_circle():
+    """Red on red: the mask of two overlapping red spheres is one blob, and the front one's
+    rim inside it is an edge of brightness (its limb dark against the other's lit face). It
+    is found along the front circle (within a pixel of it, over the overlap), and the mask's
+    own boundary is not."""
+    back, front = ((110, 120), 50), ((185, 125), 45)
+    img = _shaded_discs((240, 300), [back, front])
+    mask = ripe_mask(img, DetectorConfig())
+    (outline,) = _outline(mask)  # one blob
+    chains = interior_edges(img, mask, 80.0)
+    rims = interior_arcs(chains, [outline - 0.5])  # pieces of 8 pixels or more
+    assert rims and all(a.interior and a.blob == 0 for a in rims)
+    pts = np.vstack([a.points for a in rims])
+    (fx, fy), fr = front
+    resid = np.hypot(pts[:, 0] - fx, pts[:, 1] - fy) - fr
+    assert np.all(np.abs(resid) < 1.0), resid
+    # it spans the overlap: most of the front rim that lies inside the back disc
+    (bx, by), br = back
+    t = np.linspace(0, 2 * math.pi, 360, endpoint=False)
+    rim = np.column_stack((fx + fr * np.cos(t), fy + fr * np.sin(t)))
+    covered = np.hypot(rim[:, 0] - bx, rim[:, 1] - by) < br - 4
+    near = np.min(
+        np.hypot(rim[covered, None, 0] - pts[None, :, 0], rim[covered, None, 1] - pts[None, :, 1]), axis=1
+    )
+    assert np.mean(near < 2.0) > 0.8
+    # the rims join the front fruit's outline arcs, so that fruit shows more of its outline
+    plain = outline_arcs(outline, np.ones(len(outline), bool), 0)
+
+    def front_fruit(arcs):
+        found = group_arcs(arcs)
+        return min(found, key=lambda f: np.linalg.norm(f.circle.centre - (fx, fy)))
+
+    without, with_rims = front_fruit(plain), front_fruit(plain + rims)
+    assert any(a.interior for a in with_rims.arcs)
+    assert len(with_rims.points) > len(without.points) + 30
+    assert np.linalg.norm(with_rims.circle.centre - (fx, fy)) < 1.0
+    assert abs(with_rims.circle.radius - fr) < 1.0
+
+
+def test_an_interior_edge_joins_a_fruit_but_never_makes_one():
+    """A ring of edge alone (a highlight's rim, a shadow) is no fruit; the same points as an
+    outline arc are."""
+    t = np.linspace(0.2, 2.0, 60)
+    pts = np.column_stack((100 + 30 * np.cos(t), 100 + 30 * np.sin(t)))
+    assert group_arcs([Arc(pts, 0, True, interior=True)]) == []
+    assert len(group_arcs([Arc(pts, 0, True)])) == 1

@@ -87,6 +87,15 @@ class DetectorConfig:
             "px",
         ),
     )
+    interior_edge: float = field(
+        default=80.0,
+        metadata=_why(
+            "Canny threshold on the brightness (HSV value, 3x3 Sobel magnitude) of edges inside the "
+            "ripe mask that count as a fruit's rim over a ripe neighbour (red on red: no outline "
+            "there); such an edge joins a fruit whose circle it lies on, never makes one; 0: off",
+            ">= 0",
+        ),
+    )
     min_arc_deg: float = field(
         default=150.0,
         metadata=_why("fewest degrees of the target's outline seen (after trimming) to measure it", "deg"),
@@ -185,6 +194,7 @@ class DetectorConfig:
         _positive("detector", "corner_px", self.corner_px)
         _positive_int("detector", "junction_margin", self.junction_margin)
         _positive("detector", "arc_tol_px", self.arc_tol_px)
+        _non_negative("detector", "interior_edge", self.interior_edge)
         _open_interval("detector", "min_arc_deg", self.min_arc_deg, 0.0, 360.0, "a number in (0, 360)")
         _positive("detector", "max_fit_rms_px", self.max_fit_rms_px)
         _positive("detector", "max_fit_sigma_px", self.max_fit_sigma_px)

@@ -16,6 +16,7 @@ Frames: the paper's camera frame (x optical axis, y left, z up); pixels u right,
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +27,7 @@ from bve_mj.perception.detection import Detection, Intrinsics
 from bve_mj.perception.instances import Arc, FruitOutline, group_arcs, outline_arcs
 from bve_mj.perception.masks import _check_image, ripe_mask
 from bve_mj.perception.outline_fit import measurable_fruit, measure_outline
+from bve_mj.perception.rims import interior_arcs, interior_edges
 
 __all__ = ["FruitDetections", "Refusal", "detect_all"]
 
@@ -98,7 +100,11 @@ def detect_all(
     every = _blobs(mask)
     detections: list[Detection] = []
     refused: list[Refusal] = []
-    for outline, seen in _every_fruit(every, mask.shape, cfg, fruit.shape_spread_rel):
+    rims: list[Arc] = []
+    if cfg.interior_edge > 0.0:  # rims over a ripe neighbour: edges inside the mask
+        chains = interior_edges(image_rgb, mask, cfg.interior_edge)
+        rims = interior_arcs(chains, [b.outline for b in every])
+    for outline, seen in _every_fruit(every, mask.shape, cfg, fruit.shape_spread_rel, rims):
         det = measure_outline(
             outline, seen, every, mask, (0, 0), intrinsics, fruit, measurement, cfg, up_camera=up_camera
         )
@@ -111,10 +117,15 @@ def detect_all(
 
 
 def _every_fruit(
-    every: list[_Blob], shape: tuple[int, ...], cfg: DetectorConfig, shape_rel: float
+    every: list[_Blob],
+    shape: tuple[int, ...],
+    cfg: DetectorConfig,
+    shape_rel: float,
+    rims: Sequence[Arc] = (),
 ) -> list[tuple[FruitOutline, float]]:
     """The fruit in the ripe blobs ``every`` (of a mask of ``shape`` (H, W)), each once, with
-    the degrees of its outline seen; longest outline first.
+    the degrees of its outline seen; longest outline first. ``rims``: interior arcs (edges
+    inside the mask), each numbered by its blob in ``every``; they join a blob's arcs.
 
     Each blob of at least ``cfg.min_area_px``, largest first, is taken with its neighbouring
     fragments as ``detect`` takes the blob its prediction falls on, their arcs grouped into
@@ -129,6 +140,7 @@ def _every_fruit(
             o = every[k].outline
             usable = (o[:, 0] > 0) & (o[:, 0] < W - 1) & (o[:, 1] > 0) & (o[:, 1] < H - 1)
             arcs_of[k] = outline_arcs(o + 0.5, usable, k, corner_px=cfg.corner_px, margin=cfg.junction_margin)
+            arcs_of[k] += [a for a in rims if a.blob == k]
         return arcs_of[k]
 
     index = {id(b): k for k, b in enumerate(every)}

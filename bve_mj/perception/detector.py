@@ -49,6 +49,7 @@ from bve_mj.perception.detection import Detection, Intrinsics, NoDetection, Pred
 from bve_mj.perception.instances import Arc, group_arcs, outline_arcs
 from bve_mj.perception.masks import _check_image, ripe_mask
 from bve_mj.perception.outline_fit import measurable_fruit, measure_outline
+from bve_mj.perception.rims import interior_arcs, interior_edges
 
 __all__ = ["detect"]
 
@@ -141,6 +142,9 @@ def detect(
         o = b.outline
         usable = (o[:, 0] > x0) & (o[:, 0] < x1 - 1) & (o[:, 1] > y0) & (o[:, 1] < y1 - 1)
         arcs += outline_arcs(o + 0.5, usable, k, corner_px=cfg.corner_px, margin=cfg.junction_margin)
+    if cfg.interior_edge > 0.0:  # rims over a ripe neighbour: edges inside the mask
+        chains = interior_edges(image_rgb[y0:y1, x0:x1], mask, cfg.interior_edge)
+        arcs += interior_arcs([c + (x0, y0) for c in chains], [b.outline for b in near])
     # a fruit that is not a sphere is not a circle in the image: its outline lies inside
     # the circle through its widest parts by up to the prior's shape spread (apparent
     # radius ±s); the arcs inside by that much are still its own, count as seen, and the

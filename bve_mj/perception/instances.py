@@ -18,8 +18,12 @@ union of overlapping circles turns inwards wherever two of them meet. So:
    sides of an occluder join; arcs of two touching fruit do not, whatever the overlap,
    because each lies on its own circle.
 
-Where two fruit meet there is no outline at all (red on red), so the boundary shared with a
-neighbour is never fitted: only each fruit's own outer arcs are.
+Where two fruit meet there is no outline at all (red on red): the mask runs on over the
+junction. But the nearer fruit's rim is still an edge of brightness there (its limb darkens
+towards the edge, against the lit face of the fruit behind): those edges inside the mask
+(:mod:`bve_mj.perception.rims`) become arcs too, which
+join the fruit whose circle they lie on and never seed one. The fruit behind has no outline
+there at all and is fitted on its own outer arcs.
 
 Pixel coordinates here are those the outlines are given in (the detector passes pixel
 centres: OpenCV's indices + 0.5).
@@ -63,11 +67,19 @@ class Arc:
         blob: which blob it bounds (the caller's number for it).
         convex: it bends outwards, as a silhouette does (an occluder edge bends inwards or
             runs straight).
+        interior: it is not the blob's outline but an edge inside the ripe mask (a step in
+            brightness where a fruit's rim lies over a ripe neighbour: red on red). Such an
+            arc joins a fruit whose circle it lies on, and never seeds one (a cast shadow, a
+            blush, a highlight's rim are edges inside a fruit too). Its points are the pixels
+            where the brightness changes fastest, which lie about as far inside the true
+            silhouette as an outline's boundary pixels (the limb darkens into the edge), so
+            the fit treats both alike.
     """
 
     points: np.ndarray
     blob: int
     convex: bool
+    interior: bool = False
 
 
 @dataclass(frozen=True)
@@ -312,8 +324,8 @@ def group_arcs(
 
     free = np.ones(len(conv), dtype=bool)
     groups: list[tuple[Circle, list[int]]] = []
-    for seed, (_, _, own) in enumerate(scored):
-        if not free[seed] or sizes[seed] < min_seed:
+    for seed, (_, arc, own) in enumerate(scored):
+        if not free[seed] or sizes[seed] < min_seed or arc.interior:
             continue
         free[seed] = False
         if own is None:

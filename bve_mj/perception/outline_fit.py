@@ -191,7 +191,9 @@ def measure_outline(
             )
     # the shape no longer biases the size when the spheroid measured it: only the radius does
     size_spread = fruit.size_spread_rel if sph is None else fruit.radius_spread_rel / math.sqrt(3.0)
-    outline_points = sum(len(blobs[k].outline) for k in outline.blobs)
+    outline_points = sum(len(blobs[k].outline) for k in outline.blobs) + sum(
+        len(a.points) for a in outline.arcs if a.interior
+    )
     rho = fruit.radius_m / math.sin(alpha)
     # covariance: lateral from the centre pixel error; range from the unknown true radius
     # (uniform ±spread) and the pixel error of the apparent radius, dρ/dα = -ρ / tan α;
