@@ -13,6 +13,7 @@ import numpy as np
 
 from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
+from bve_mj.estimation.metrics import chi2_quantile
 from bve_mj.estimation.noise import NoiseModel
 from bve_mj.estimation.view_correlation import ViewCorrelation, fit_view_correlation
 
@@ -264,8 +265,6 @@ def _tail_scale(
     over all fruits says, the same way in every view of them, so a handful of views of one
     agree and do not average it out): a Gaussian with the right variance holds the bulk and
     misses the tail; the claim is scaled to hold the tail."""
-    from bve_mj.estimation.metrics import chi2_quantile
-
     refused_of: dict[tuple[Any, Any], list[bool]] = {}
     for r in [*kept, *refused]:
         refused_of.setdefault((r.get("scenario"), r.get("scene_seed")), []).append(not r.get("detected"))

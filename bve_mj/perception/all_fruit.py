@@ -134,13 +134,16 @@ def _every_fruit(
     new)."""
     H, W = shape[:2]
     arcs_of: dict[int, list[Arc]] = {}
+    rims_of: dict[int, list[Arc]] = {}
+    for a in rims:
+        rims_of.setdefault(a.blob, []).append(a)
 
     def arcs(k: int) -> list[Arc]:
         if k not in arcs_of:  # the blob's arcs, numbered by its index in ``every``
             o = every[k].outline
             usable = (o[:, 0] > 0) & (o[:, 0] < W - 1) & (o[:, 1] > 0) & (o[:, 1] < H - 1)
             arcs_of[k] = outline_arcs(o + 0.5, usable, k, corner_px=cfg.corner_px, margin=cfg.junction_margin)
-            arcs_of[k] += [a for a in rims if a.blob == k]
+            arcs_of[k] += rims_of.get(k, [])
         return arcs_of[k]
 
     index = {id(b): k for k, b in enumerate(every)}
