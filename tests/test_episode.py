@@ -55,6 +55,21 @@ def test_leaf_partly_covering_the_fruit_within_20_mm():
     _check_joint_limits(ep)
 
 
+def test_views_that_measured_nothing_send_the_camera_elsewhere():
+    """``beefsteak`` of the suite, episode seed 2461242679 (held out: run of base seed 7321):
+    the big fruit is hidden from most of the views the BVE prefers. Before the failed views'
+    cost (``planner.untried_weight``), the arm held still among them, each view measuring
+    nothing, until the stall rule ended the episode ``unreliable`` 12.9 mm off after one
+    measurement; with ``untried_weight = 0`` it still does (broken on purpose)."""
+    from bve_mj.campaigns.scenarios import suite_dir
+    from bve_mj.config import load_settings
+
+    ep = run_mujoco_episode(load_settings(suite_dir() / "beefsteak.toml"), 2461242679)
+    assert sum(v.accepted for v in ep.result.views) >= 3
+    assert ep.result.outcome in ("converged", "stable"), ep.result.outcome
+    assert ep.final_error_mm < 5.0
+
+
 def test_approach_ends_close_without_touching_or_crossing_the_row():
     """Seed 1. Seeds 1-8 end ``approached`` in 7 of 8 (seed 2 stalls 0.107 m away,
     ``approach_blocked``, since the noise model was refitted with interior edges; before it,

@@ -2,10 +2,16 @@
 
 import json
 
+import numpy as np
 import pytest
 
+from bve_mj.config import FilterConfig
+from bve_mj.estimation import Belief, CameraModel
+from bve_mj.loop.episode import EpisodeLoop
 from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
+from bve_mj.planning import ViewPlan
+from bve_mj.sim.world import Observation
 
 
 def test_outcomes_read_as_their_text_and_say_what_they_mean():
@@ -33,3 +39,52 @@ def test_events_carry_a_known_kind_and_their_reason():
     assert str(Event("belief_reset")) == "belief_reset"
     with pytest.raises(ValueError, match="not one of"):
         Event("exploded")  # type: ignore[arg-type]
+
+
+class _ScriptedWorld:
+    """A camera that measures one fruit from the side, after a first view that found two fruit
+    the estimate allowed (their rough centres in ``view_info``)."""
+
+    def __init__(self, fruit_m: np.ndarray, candidates: list[np.ndarray]) -> None:
+        self.fruit_m, self.p_world_camera, self.views = fruit_m, np.array([0.2, 0.0, 0.3]), 0
+        rough = np.diag([0.02**2, 0.002**2, 0.002**2])  # range from size: long along the ray
+        found = [{"p_world_m": c.tolist(), "cov_world_m2": rough.tolist()} for c in candidates]
+        self.first = {"events": ["ambiguous"], "ambiguous_candidates": found}
+
+    def move_camera(self, plan: ViewPlan) -> None:
+        self.p_world_camera = np.asarray(plan.p_world_camera, dtype=float)
+
+    def observe(self, belief: Belief | None = None) -> Observation | None:
+        self.views += 1
+        if self.views == 1:
+            return None
+        R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # looks along +y
+        p = self.fruit_m - 0.3 * R[:, 0]
+        self.p_world_camera = p
+        return Observation(R.T @ (self.fruit_m - p), CameraModel(p, R, np.eye(3) * 1e-7))
+
+    def view_info(self) -> dict[str, object]:
+        return self.first if self.views == 1 else {}
+
+
+@pytest.mark.parametrize(
+    ("other_m", "expected"),
+    [
+        ([0.53, 0.0, 0.3], Outcome.AMBIGUOUS),  # on the prior's ray, as likely: the prior cannot tell
+        ([0.50, 0.03, 0.3], Outcome.CONVERGED),  # 15 sigma across the prior's ray: not the target
+    ],
+)
+def test_a_fruit_localised_beside_another_the_prior_allows_as_well_is_ambiguous(other_m, expected):
+    """A view found two fruit the estimate allowed; the views after it localised one. Only the
+    prior says which fruit is the target: when the other fits it about as well, the outcome
+    is ``ambiguous`` (exit 3), not ``converged``."""
+    target = np.array([0.49, 0.0, 0.3])
+    prior = Belief(np.array([0.50, 0.0, 0.3]), np.diag([0.029**2, 0.002**2, 0.002**2]))  # along x
+    world = _ScriptedWorld(target, [target, np.array(other_m)])
+    loop = EpisodeLoop(world, prior, FilterConfig(gate_probability=None), ambiguity_ratio=20.0)
+    loop.start()
+    for _ in range(3):
+        loop.step(ViewPlan(world.p_world_camera, target, "optimal", True, 0.0))
+    result = loop.finish(Outcome.CONVERGED)
+    assert np.linalg.norm(result.final.mean - target) < 1e-3
+    assert result.outcome == expected

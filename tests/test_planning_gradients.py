@@ -18,6 +18,7 @@ from bve_mj.planning import (
     PlantWall,
     RangeInformation,
     StepLimit,
+    UntriedTerm,
     WorkspaceSphere,
 )
 from tests.conftest import finite_difference
@@ -115,6 +116,19 @@ def test_approach_gradient(rng):
     for _ in range(20):
         c, k = random_point_pair(rng)
         _check_term(ApproachTerm(k, rng.uniform(0.1, 2.0)), c)
+
+
+def test_untried_gradient(rng):
+    """The failed views' cost, near them (where its slope matters) and anywhere."""
+    for _ in range(20):
+        c, k = random_point_pair(rng)
+        e = (c - k) / np.linalg.norm(c - k)
+        near = e + rng.normal(0.0, 0.3, (3, 3))  # failed views within ~20 deg of c
+        far = rng.standard_normal((2, 3))
+        failed = np.vstack([near, far])
+        failed /= np.linalg.norm(failed, axis=1, keepdims=True)
+        term = UntriedTerm(k, failed, math.radians(rng.uniform(10.0, 40.0)), rng.uniform(0.5, 3.0))
+        _check_term(term, c)
 
 
 def _constraints(rng):
@@ -255,7 +269,12 @@ def test_lazy_objective_is_the_eager_one_bit_for_bit(dim, rng):
             Lo = np.linalg.inv(random_spd_n(rng, dim))
             terms = [DispersionLoss(info, x, Lo)] + [MaxEigenvalueLoss(info, x, Lo, t) for t in (0.0, 0.5)]
             for term in terms:
-                for objective in (Objective((term,), 1e6), Objective((term, ApproachTerm(x[:3], 0.3)))):
+                untried = UntriedTerm(x[:3], np.array([[1.0, 0.0, 0.0], [0.0, 0.6, 0.8]]), 0.4, 1.0)
+                for objective in (
+                    Objective((term,), 1e6),
+                    Objective((term, ApproachTerm(x[:3], 0.3))),
+                    Objective((term, untried)),
+                ):
                     value, gradient = objective.lazy(c)
                     ref_value, ref_gradient = objective.value_and_gradient(c)
                     assert _same(value, ref_value) and _same(gradient(), ref_gradient), name

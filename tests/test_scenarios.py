@@ -89,6 +89,8 @@ def test_a_file_measurement_survives(tmp_path):
         ("[detector]\nambiguity_ratio = 0.5\n", "detector.ambiguity_ratio"),
         ('[planner]\nfailed_view_width_deg = "wide"\n', "planner.failed_view_width_deg"),
         ("[planner]\nfailed_view_width_deg = 120\n", "planner.failed_view_width_deg"),
+        ("[planner]\nuntried_weight = -1\n", "planner.untried_weight"),
+        ('[planner]\nuntried_weight = "nan"\n', "planner.untried_weight"),
         ("[fruit]\nshape_index = 4.0\n", "fruit.shape_index"),
     ],
 )

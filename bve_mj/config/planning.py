@@ -159,6 +159,16 @@ class PlannerConfig:
             "deg",
         ),
     )
+    untried_weight: float = field(
+        default=1.0,
+        metadata=_why(
+            "beta: with failed views, the BVE's loss grows by beta per failed view near the "
+            "candidate (the theta0 kernel; the dispersion loss's nats; with the max-eigenvalue loss "
+            "the share 1 - e^-beta of the current largest variance), so the camera leaves a place "
+            "where every view within a step failed instead of holding still (0 = off)",
+            "nats",
+        ),
+    )
     horizon: int = field(
         default=1,
         metadata=_why(
@@ -193,6 +203,8 @@ class PlannerConfig:
             raise ConfigError(
                 "planner.failed_view_width_deg", self.failed_view_width_deg, "a number in [0, 90]"
             )
+        if not 0.0 <= _number("planner", "untried_weight", self.untried_weight) <= 20.0:
+            raise ConfigError("planner.untried_weight", self.untried_weight, "a number in [0, 20]")
         _positive_int("planner", "max_iterations", self.max_iterations, 100_000)
         _positive_int("planner", "horizon", self.horizon)
         if self.horizon > 6:

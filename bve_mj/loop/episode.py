@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import time
 from collections.abc import Callable, Sequence
 
@@ -42,13 +43,17 @@ def run_episode(
     on_view: Callable[[ViewRecord], None] | None = None,
     claims: Claims | None = None,
     correlation: tuple[ViewCorrelation, ViewCorrelation] | None = None,
+    ambiguity_ratio: float = 20.0,
 ) -> EpisodeResult:
     """Observe from the start pose, then up to ``steps`` times: plan, move, predict, observe,
     update; ``stop`` may end it early. Outcome: the rule that ended it, "max_views", or
     "never_detected" when no view measured the fruit ("ambiguous" when some view saw more
     than one fruit the estimate allows, event ``ambiguous``); "unreliable" instead when the
     final estimate is not supported by the measurements (:func:`supported`), or when two
-    measurements it gated out agree on another answer (:func:`_contested`).
+    measurements it gated out agree on another answer (:func:`_contested`); "ambiguous" too
+    when a view found two fruit the estimate allowed, and the other fits the prior about as
+    well as the fruit localised (likelihood ratio below ``ambiguity_ratio``, the detector's:
+    :func:`_another_fruit_fits_the_prior`).
 
     ``claims``: what the views record (and the stop rules test) beside the filter's own
     belief, which the planner plans with (see :class:`Claims`); None: the filter's belief.
@@ -66,7 +71,7 @@ def run_episode(
         EstimationError: naming the view, when a measurement would put NaN or infinite
             values into the belief (it never does).
     """
-    loop = EpisodeLoop(world, prior, filter_config, planner, on_view, claims, correlation)
+    loop = EpisodeLoop(world, prior, filter_config, planner, on_view, claims, correlation, ambiguity_ratio)
     loop.start()
     outcome: Outcome | None = None
     for i in range(1, steps + 1):
@@ -97,8 +102,10 @@ class EpisodeLoop:
         on_view: Callable[[ViewRecord], None] | None = None,
         claims: Claims | None = None,
         correlation: tuple[ViewCorrelation, ViewCorrelation] | None = None,
+        ambiguity_ratio: float = 20.0,
     ) -> None:
         self.world, self.prior, self.planner = world, prior, planner
+        self.ambiguity_ratio = ambiguity_ratio
         self.on_view, self.claims, self.correlation = on_view, claims, correlation
         self.filter_config = filter_config
         self._t0 = time.perf_counter()
@@ -141,6 +148,9 @@ class EpisodeLoop:
             or _contested(self.prior, belief, self._contested, gate, update)
         ):
             outcome = Outcome.UNRELIABLE
+        ratio = self.ambiguity_ratio
+        if outcome.localised and _another_fruit_fits_the_prior(self.prior, belief, views, ratio):
+            outcome = Outcome.AMBIGUOUS
         return EpisodeResult(self.prior, tuple(views), time.perf_counter() - self._t0, outcome)
 
     def _fuse(
@@ -233,6 +243,43 @@ def _contested(
         first = update(prior, a.z, a.model, gate)
         if first.accepted and update(first.belief, b.z, b.model, gate).accepted:
             return True
+    return False
+
+
+_SAME_FRUIT_CHI2 = 16.266  # χ²(3) quantile at 0.999
+
+
+def _another_fruit_fits_the_prior(
+    prior: Belief, final: Belief, views: Sequence[ViewRecord], ratio: float
+) -> bool:
+    """Whether a view found two fruit the estimate allowed (``ambiguous_candidates`` in its
+    world info: their rough centres, distinct fruit) and one of them, another fruit than the
+    one localised, fits the prior about as well as the final estimate does (likelihood ratio
+    under the prior below ``ratio``). The fruit localised is the candidate nearest the final
+    estimate (Mahalanobis), if within its χ²(3) 0.999 gate. The prior is all that says which
+    fruit is the target: the views then localised a fruit, but which of the two is the
+    target they cannot tell (seen in ``cherry_truss``: the target hidden from every view but
+    the ambiguous ones, the neighbour on the prior's ray localised instead, 16 mm off,
+    claiming 1.4 mm)."""
+    p0, f = prior.position, final.position
+    d2_final = float((f.mean - p0.mean) @ np.linalg.solve(p0.cov + f.cov, f.mean - p0.mean))
+    margin = 2.0 * math.log(ratio)
+    for v in views:
+        found = (v.world or {}).get("ambiguous_candidates", ())
+        rough = [
+            (np.asarray(c["p_world_m"], dtype=float), np.asarray(c["cov_world_m2"], dtype=float))
+            for c in found  # type: ignore[attr-defined]
+        ]
+        if not rough:
+            continue
+        to_final = [float((c - f.mean) @ np.linalg.solve(C + f.cov, c - f.mean)) for c, C in rough]
+        localised = int(np.argmin(to_final)) if min(to_final) <= _SAME_FRUIT_CHI2 else -1
+        for i, (c, C) in enumerate(rough):
+            if i == localised:
+                continue
+            d2 = float((c - p0.mean) @ np.linalg.solve(p0.cov + C, c - p0.mean))
+            if d2 - d2_final < margin:
+                return True
     return False
 
 

@@ -28,7 +28,8 @@ class Outcome(StrEnum):
     NEVER_DETECTED = "never_detected"
     """No view detected the fruit."""
     AMBIGUOUS = "ambiguous"
-    """No view told the target apart from a neighbour."""
+    """No view told the target apart from a neighbour (nothing measured, or a fruit localised
+    that fits the prior no better than another one seen)."""
     UNREACHABLE = "unreachable"
     """The arm cannot reach a pose that looks at the fruit."""
     INCOMPLETE = "incomplete"
@@ -62,7 +63,8 @@ _NOTES = {
     "measured",
     Outcome.NEVER_DETECTED: "no view detected the fruit: the estimate is the prior",
     Outcome.AMBIGUOUS: "more than one fruit in view fits the estimate about equally well, and no view "
-    "told which one is the target: nothing was measured, the estimate is the prior",
+    "told which one is the target: the estimate is the prior, or a fruit that fits the prior no "
+    "better than another one seen (maybe not the target)",
     Outcome.APPROACH_BLOCKED: "the arm found no reachable pose closer to the fruit (the camera stopped "
     "moving): the fruit is localised but not approached",
     Outcome.UNRELIABLE: "the final estimate is not supported by the measurements (fewer than two "

@@ -155,20 +155,21 @@ def _associate(
         z, R = rough
         nu = z - prediction.p_camera
         d2 = float(nu @ np.linalg.solve(prediction.cov_camera + R, nu))
-        scored.append((d2, fr, seen))
+        scored.append((d2, fr, seen, (z, R)))
     if not scored:
         return NoDetection("no fruit silhouette in the ripe blobs near the estimate")
     scored.sort(key=lambda e: e[0])
-    d2_best, best, seen_best = scored[0]
+    d2_best, best, seen_best, rough_best = scored[0]
     margin = 2.0 * math.log(cfg.ambiguity_ratio)
-    for d2, other, _ in scored[1:]:
+    for d2, other, _, rough in scored[1:]:
         apart = float(np.linalg.norm(other.circle.centre - best.circle.centre))
         if apart <= 0.5 * max(best.circle.radius, other.circle.radius):
             continue  # the same fruit, in two groups of arcs
         if d2 <= _CHI2_3_999 and d2 - d2_best < margin:
             return NoDetection(
                 f"ambiguous: two fruit fit the estimate (Mahalanobis^2 {d2_best:.1f} and {d2:.1f}, "
-                f"likelihood ratio {math.exp(0.5 * (d2 - d2_best)):.1f} < {cfg.ambiguity_ratio:g})"
+                f"likelihood ratio {math.exp(0.5 * (d2 - d2_best)):.1f} < {cfg.ambiguity_ratio:g})",
+                (rough_best, rough),
             )
         break  # sorted: the rest are less likely still
     return best, seen_best

@@ -90,9 +90,14 @@ class Detection:
 
 @dataclass(frozen=True)
 class NoDetection:
-    """Nothing measured, and why (``ambiguous``: more than one fruit fits the estimate)."""
+    """Nothing measured, and why (``ambiguous``: more than one fruit fits the estimate).
+
+    ``candidates``: when ambiguous, the rough 3-D centres of the fruit the estimate allowed,
+    each (p_camera (3,), cov_camera (3, 3)) [m, m²] in the camera frame: the loop checks at
+    the end whether the fruit it localised was told apart from them."""
 
     reason: str
+    candidates: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
 
     @property
     def ambiguous(self) -> bool:

@@ -69,25 +69,26 @@ def _pick(
                 continue
             z, R = rough
             nu = z - prediction.p_camera
-            scored.append((float(nu @ np.linalg.solve(prediction.cov_camera + R, nu)), inst))
+            scored.append((float(nu @ np.linalg.solve(prediction.cov_camera + R, nu)), inst, (z, R)))
         if not scored:
             return NoDetection("no instance in front of the camera")
         scored.sort(key=lambda e: e[0])
-        d2_best, best = scored[0]
+        d2_best, best, rough_best = scored[0]
         if d2_best > _GATE_CHI2:
             return NoDetection(
                 f"no instance the estimate allows: the nearest is at Mahalanobis^2 {d2_best:.1f} "
                 f"> {_GATE_CHI2:g}"
             )
         margin = 2.0 * math.log(cfg.ambiguity_ratio)
-        for d2, other in scored[1:]:
+        for d2, other, rough in scored[1:]:
             apart = float(np.linalg.norm(other.centre_px - best.centre_px))
             if apart <= 0.5 * max(best.radius_px, other.radius_px):
                 continue  # the same fruit twice (overlapping boxes or masks)
             if d2 <= _CHI2_3_999 and d2 - d2_best < margin:
                 return NoDetection(
                     f"ambiguous: two fruit fit the estimate (Mahalanobis^2 {d2_best:.1f} and {d2:.1f}, "
-                    f"likelihood ratio {math.exp(0.5 * (d2 - d2_best)):.1f} < {cfg.ambiguity_ratio:g})"
+                    f"likelihood ratio {math.exp(0.5 * (d2 - d2_best)):.1f} < {cfg.ambiguity_ratio:g})",
+                    (rough_best, rough),
                 )
             break  # sorted: the rest are less likely still
         return best

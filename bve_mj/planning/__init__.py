@@ -34,6 +34,7 @@ from bve_mj.planning.losses import (
     DispersionLoss,
     MaxEigenvalueLoss,
     Objective,
+    UntriedTerm,
     approach_activation,
 )
 from bve_mj.planning.plan import LearnsFromFailedViews, LearnsFromFusedViews, Planner, PlanStatus, ViewPlan
@@ -63,6 +64,7 @@ __all__ = [
     "RandomPlanner",
     "RangeInformation",
     "StepLimit",
+    "UntriedTerm",
     "ViewPlan",
     "WorkspaceSphere",
     "approach_activation",

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+import bve_mj.linalg as la
 from bve_mj.config import LossName, Settings
 from bve_mj.estimation.belief import Belief
 from bve_mj.planning.constraints import (
@@ -48,6 +49,7 @@ from bve_mj.planning.losses import (
     LossTerm,
     MaxEigenvalueLoss,
     Objective,
+    UntriedTerm,
     approach_activation,
 )
 from bve_mj.planning.plan import PlanStatus, ViewPlan
@@ -150,7 +152,19 @@ class BvePlanner:
         act = approach_activation(iteration, p.approach_aggressiveness, p.approach_set_point)
         if act > 0.0:
             terms.append(ApproachTerm(belief.centre_m, act))
+        if self._failed and p.untried_weight > 0.0:
+            terms.append(self._untried(belief.centre_m, Lo))
         return Objective(tuple(terms), _LOSS_SCALE[self.loss])
+
+    def _untried(self, k_hat: np.ndarray, Lo: np.ndarray) -> UntriedTerm:
+        """The cost of looking again from where views failed (:class:`UntriedTerm`), in the
+        loss's units: ``untried_weight`` nats for the dispersion; for the max-eigenvalue loss
+        the share 1 - e^-β of the largest variance without a view."""
+        p = self.settings.planner
+        weight = p.untried_weight
+        if self.loss != "dispersion":
+            weight = -math.expm1(-weight) * float(np.linalg.eigvalsh(la.inv(Lo)[:3, :3])[-1])
+        return UntriedTerm(k_hat, np.array(self._failed), math.radians(p.failed_view_width_deg), weight)
 
     def task_constraints(self, k_hat: np.ndarray) -> list[Constraint]:
         """Every task constraint around the estimate (the step limit is added in plan)."""

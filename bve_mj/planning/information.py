@@ -22,7 +22,9 @@ p(c)·Λn(c), with p(c) = Π_j (1 - exp(-(1 - e(c)·d_j)/w)), e(c) the unit dire
 estimate to c, d_j the directions of the failed views and w = 1 - cos θ₀
 (:class:`FailedViewDiscount`): views within about θ₀ of a failed one are worth little, and
 the BVE looks elsewhere instead of returning to the best view on paper, which it cannot
-use.
+use. Where failed views surround the camera, p(c) is ~0 within a whole step and this term
+goes flat; the loss then also counts the failed views near c
+(:class:`~bve_mj.planning.losses.UntriedTerm`).
 """
 
 from __future__ import annotations

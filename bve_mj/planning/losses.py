@@ -4,6 +4,8 @@
 - :class:`MaxEigenvalueLoss` (eq. 11): f(c) = λmax((Λn(c) + Λo)⁻¹).
 - :class:`ApproachTerm` (eqs. 12-13): act(i, a, b)·‖k̂ - c‖ with act = 1/(1 + e^(-a(i - b))),
   b the set point (the paper's text writes c by mistake).
+- :class:`UntriedTerm` (not the paper's): weight·Σ_j exp(-(1 - e(c)·d_j)/w), a cost for
+  looking again from where views measured nothing (directions d_j from the estimate).
 
 Λo = Σo⁻¹ is the current fused precision (the EKF's P⁻¹). With the radius (and calibration
 biases) in the state, the losses score the centre's block of the fused covariance.
@@ -30,6 +32,7 @@ __all__ = [
     "LossTerm",
     "MaxEigenvalueLoss",
     "Objective",
+    "UntriedTerm",
     "approach_activation",
     "dispersion",
     "max_eigenvalue",
@@ -217,6 +220,49 @@ class ApproachTerm:
         n = la.norm(d)
         grad = self.weight * d / n if n > 0.0 else np.zeros(3)
         return self.weight * n, grad
+
+    def lazy(self, c: np.ndarray) -> tuple[float, Gradient]:
+        value, grad = self.value_and_gradient(c)
+        return value, lambda: grad
+
+
+@dataclass(frozen=True)
+class UntriedTerm:
+    """weight·Σ_j g_j(c), g_j = exp(-(1 - e(c)·d_j)/w): the failed views near c, counted.
+
+    e(c) is the unit direction from the estimate ``k_hat`` to c, d_j (k, 3) the unit
+    directions of the views that measured nothing, w = 1 - cos θ₀ (``width_rad`` = θ₀), the
+    kernel of :class:`~bve_mj.planning.information.FailedViewDiscount`. That discount scales
+    a view's information by its odds of a detection; once failed views surround the camera,
+    those odds are ~0 everywhere within one step, the information term goes flat, and the
+    optimiser stays where it is, fusing nothing view after view (seen in truss scenes: the
+    camera held still until the stall rule ended the episode). This term keeps a slope
+    towards views not tried yet, ``weight`` per failed view at its own direction (in the
+    loss's units)."""
+
+    k_hat: np.ndarray
+    failed: np.ndarray
+    width_rad: float
+    weight: float
+
+    def value(self, c: np.ndarray) -> float:
+        return self.value_and_gradient(c)[0]
+
+    def gradient(self, c: np.ndarray) -> np.ndarray:
+        return self.value_and_gradient(c)[1]
+
+    def value_and_gradient(self, c: np.ndarray) -> tuple[float, np.ndarray]:
+        d = np.asarray(c, dtype=float) - self.k_hat
+        r = la.norm(d)
+        if not r > 0.0:
+            return self.weight * len(self.failed), np.zeros(3)
+        e = d / r
+        w = 1.0 - math.cos(self.width_rad)
+        cos = self.failed @ e
+        g = np.exp(-(1.0 - cos) / w)
+        # ∂(e·d_j)/∂c = (I - e eᵀ) d_j / r
+        dcos = (self.failed - np.outer(cos, e)) / r
+        return self.weight * float(g.sum()), self.weight * (g / w) @ dcos
 
     def lazy(self, c: np.ndarray) -> tuple[float, Gradient]:
         value, grad = self.value_and_gradient(c)

@@ -100,6 +100,7 @@ class KinematicBvePlanner:
     formulation: Formulation = "joint"
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
     _bve: BvePlanner = field(init=False)
+    _left_failed: bool = field(init=False, default=False)
 
     def __post_init__(self) -> None:
         if self.formulation not in get_args(Formulation):
@@ -121,6 +122,7 @@ class KinematicBvePlanner:
     def note_failed_view(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
         """See :meth:`BvePlanner.note_failed_view`."""
         self._bve.note_failed_view(p_world_camera, p_world_target)
+        self._left_failed = True
 
     def note_fused_view(
         self, p_world_camera: np.ndarray, p_world_target: np.ndarray, *, restart: bool = False
@@ -209,14 +211,23 @@ class KinematicBvePlanner:
 
         # Seeds: the current configuration (often a stationary point of the loss: the view
         # just taken) and the best-scoring feasible point of the BVE's seed directions,
-        # mapped to joint space by one pseudo-inverse step.
-        seeds = [self.q]
+        # mapped to joint space by one pseudo-inverse step. After a view that measured
+        # nothing, the current configuration is such a point of every term (the discounted
+        # information is ~0 there, the failed views' cost at its peak): the two best seed
+        # directions instead.
+        failed, self._left_failed = self._left_failed, False
+        seeds = [] if failed else [self.q]
         candidates = c_now + 0.9 * step.step_m * SEED_DIRECTIONS
-        scored = [(objective.value(x), i) for i, x in enumerate(candidates) if max_violation(task, x) <= tol]
+        scored = sorted(
+            (objective.value(x), i) for i, x in enumerate(candidates) if max_violation(task, x) <= tol
+        )
         if scored:
-            c_best = candidates[min(scored)[1]]
             _, _, J = prob.at(self.q)
-            seeds.append(self.kin.clip(self.q + np.linalg.pinv(J[:3]) @ (c_best - c_now)))
+            Jinv = np.linalg.pinv(J[:3])
+            for _, i in scored[: 2 if failed else 1]:
+                seeds.append(self.kin.clip(self.q + Jinv @ (candidates[i] - c_now)))
+        if not seeds:
+            seeds = [self.q]
         best: tuple[float, np.ndarray] | None = None
         iterations = 0
         for q0 in seeds:

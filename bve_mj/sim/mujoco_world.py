@@ -344,6 +344,12 @@ class MujocoWorld:
             out["detection"] = {"none": det.reason}
             if det.ambiguous:
                 out["events"] = ["ambiguous"]
+            if det.candidates and last.q_encoders is not None:  # in the frame the filter fuses in
+                p, R = self.kin.camera_pose(last.q_encoders)
+                out["ambiguous_candidates"] = [
+                    {"p_world_m": (p + R @ z).tolist(), "cov_world_m2": (R @ C @ R.T).tolist()}
+                    for z, C in det.candidates
+                ]
         if last.every is not None:
             out["detections"] = [
                 {"centre_px": d.centre_px.tolist(), "radius_px": d.radius_px, "arc_deg": d.arc_deg}
