@@ -255,7 +255,10 @@ def _another_fruit_fits_the_prior(
     """Whether a view found two fruit the estimate allowed (``ambiguous_candidates`` in its
     world info: their rough centres, distinct fruit) and one of them, another fruit than the
     one localised, fits the prior about as well as the final estimate does (likelihood ratio
-    under the prior below ``ratio``). The fruit localised is the candidate nearest the final
+    under the prior below ``ratio``). Only views before the first accepted measurement
+    count: until then the prior alone said which fruit was meant; after it, the belief did
+    (an ambiguous view 5 cm from a localised fruit is a refusal, not a second fruit the prior
+    allows). The fruit localised is the candidate nearest the final
     estimate (Mahalanobis), if within its χ²(3) 0.999 gate. The prior is all that says which
     fruit is the target: the views then localised a fruit, but which of the two is the
     target they cannot tell (seen in ``cherry_truss``: the target hidden from every view but
@@ -265,6 +268,8 @@ def _another_fruit_fits_the_prior(
     d2_final = float((f.mean - p0.mean) @ np.linalg.solve(p0.cov + f.cov, f.mean - p0.mean))
     margin = 2.0 * math.log(ratio)
     for v in views:
+        if v.accepted:  # the fruit was chosen: later ambiguous views refused a measurement of it
+            break
         found = (v.world or {}).get("ambiguous_candidates", ())
         rough = [
             (np.asarray(c["p_world_m"], dtype=float), np.asarray(c["cov_world_m2"], dtype=float))
