@@ -13,6 +13,7 @@ import numpy as np
 from bve_mj.config import FilterConfig
 from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation import Belief, UpdateResult, filter_update, predict
+from bve_mj.estimation.metrics import chi2_quantile
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
 from bve_mj.geometry import unit
 from bve_mj.loop.claims import Claims
@@ -246,9 +247,6 @@ def _contested(
     return False
 
 
-_SAME_FRUIT_CHI2 = 16.266  # χ²(3) quantile at 0.999
-
-
 def _another_fruit_fits_the_prior(
     prior: Belief, final: Belief, views: Sequence[ViewRecord], ratio: float
 ) -> bool:
@@ -266,7 +264,7 @@ def _another_fruit_fits_the_prior(
     claiming 1.4 mm)."""
     p0, f = prior.position, final.position
     d2_final = float((f.mean - p0.mean) @ np.linalg.solve(p0.cov + f.cov, f.mean - p0.mean))
-    margin = 2.0 * math.log(ratio)
+    margin, same_fruit = 2.0 * math.log(ratio), float(chi2_quantile(0.999, 3))
     for v in views:
         if v.accepted:  # the fruit was chosen: later ambiguous views refused a measurement of it
             break
@@ -278,7 +276,7 @@ def _another_fruit_fits_the_prior(
         if not rough:
             continue
         to_final = [float((c - f.mean) @ np.linalg.solve(C + f.cov, c - f.mean)) for c, C in rough]
-        localised = int(np.argmin(to_final)) if min(to_final) <= _SAME_FRUIT_CHI2 else -1
+        localised = int(np.argmin(to_final)) if min(to_final) <= same_fruit else -1
         for i, (c, C) in enumerate(rough):
             if i == localised:
                 continue

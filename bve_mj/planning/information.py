@@ -53,6 +53,7 @@ __all__ = [
     "ObservationInformation",
     "RangeInformation",
     "SizeInformation",
+    "failed_view_kernel",
     "information_lazy",
     "observation_information",
     "size_information",
@@ -164,6 +165,23 @@ class RangeInformation:
         return _pad(np.outer(e, e) / self.variance_m2, None, n)[0], derivative
 
 
+def failed_view_kernel(
+    failed: np.ndarray, c: np.ndarray, k_hat: np.ndarray, width_rad: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """How near the camera at c is to each failed view, seen from the estimate ``k_hat``:
+    g_j(c) = exp(-(1 - e(c)·d_j)/w) (k,), g_j/w (k,) and ∂(e(c)·d_j)/∂c (k, 3), so that
+    ∂g_j/∂c = (g_j/w)·∂(e·d_j)/∂c (e(c) the unit direction k̂ → c, d_j the rows of
+    ``failed``, w = 1 - cos ``width_rad``)."""
+    d = np.asarray(c, dtype=float) - k_hat
+    r = la.norm(d)
+    e = d / r
+    w = 1.0 - math.cos(width_rad)
+    cos = failed @ e
+    g = np.exp(-(1.0 - cos) / w)
+    # ∂(e·d_j)/∂c = (I - e eᵀ) d_j / r
+    return g, g / w, (failed - np.outer(cos, e)) / r
+
+
 @dataclass(frozen=True)
 class FailedViewDiscount:
     """p(c)·Λn(c): ``base``'s information times the odds that a view at c detects the target,
@@ -176,16 +194,8 @@ class FailedViewDiscount:
 
     def odds(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[float, np.ndarray]:
         """p(c) and ∂p/∂c (3,)."""
-        d = np.asarray(c, dtype=float) - x_hat[:3]
-        r = la.norm(d)
-        e = d / r
-        w = 1.0 - math.cos(self.width_rad)
-        u = 1.0 - self.failed @ e  # (k,) 1 - cos(angle to each failed view)
-        g = np.exp(-u / w)
-        q = 1.0 - g
-        # ∂u_j/∂c = -(I - e eᵀ) d_j / r;  ∂q_j/∂c = (g_j / w) ∂u_j/∂c
-        du = -(self.failed - np.outer(self.failed @ e, e)) / r
-        dq = (g / w)[:, None] * du
+        g, rate, dcos = failed_view_kernel(self.failed, c, x_hat[:3], self.width_rad)
+        q, dq = 1.0 - g, rate[:, None] * -dcos  # ∂q_j/∂c = -∂g_j/∂c
         p = float(np.prod(q))
         others = np.array([np.prod(np.delete(q, j)) for j in range(len(q))])
         return p, others @ dq

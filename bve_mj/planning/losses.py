@@ -23,7 +23,7 @@ from typing import Protocol
 import numpy as np
 
 import bve_mj.linalg as la
-from bve_mj.planning.information import ObservationInformation, information_lazy
+from bve_mj.planning.information import ObservationInformation, failed_view_kernel, information_lazy
 
 __all__ = [
     "ApproachTerm",
@@ -252,17 +252,10 @@ class UntriedTerm:
         return self.value_and_gradient(c)[1]
 
     def value_and_gradient(self, c: np.ndarray) -> tuple[float, np.ndarray]:
-        d = np.asarray(c, dtype=float) - self.k_hat
-        r = la.norm(d)
-        if not r > 0.0:
+        if not la.norm(np.asarray(c, dtype=float) - self.k_hat) > 0.0:
             return self.weight * len(self.failed), np.zeros(3)
-        e = d / r
-        w = 1.0 - math.cos(self.width_rad)
-        cos = self.failed @ e
-        g = np.exp(-(1.0 - cos) / w)
-        # ∂(e·d_j)/∂c = (I - e eᵀ) d_j / r
-        dcos = (self.failed - np.outer(cos, e)) / r
-        return self.weight * float(g.sum()), self.weight * (g / w) @ dcos
+        g, rate, dcos = failed_view_kernel(self.failed, c, self.k_hat, self.width_rad)
+        return self.weight * float(g.sum()), self.weight * rate @ dcos
 
     def lazy(self, c: np.ndarray) -> tuple[float, Gradient]:
         value, grad = self.value_and_gradient(c)
