@@ -47,7 +47,7 @@ class _ScriptedWorld:
 
     def __init__(self, fruit_m: np.ndarray, candidates: list[np.ndarray]) -> None:
         self.fruit_m, self.p_world_camera, self.views = fruit_m, np.array([0.2, 0.0, 0.3]), 0
-        rough = np.diag([0.02**2, 0.002**2, 0.002**2])  # range from size: long along the ray
+        rough = np.diag([0.02**2, 0.0005**2, 0.0005**2])  # range from size: long along the ray
         found = [{"p_world_m": c.tolist(), "cov_world_m2": rough.tolist()} for c in candidates]
         self.first = {"events": ["ambiguous"], "ambiguous_candidates": found}
 
@@ -68,23 +68,36 @@ class _ScriptedWorld:
 
 
 @pytest.mark.parametrize(
-    ("other_m", "expected"),
+    ("localised_m", "other_m", "expected"),
     [
-        ([0.53, 0.0, 0.3], Outcome.AMBIGUOUS),  # on the prior's ray, as likely: the prior cannot tell
-        ([0.50, 0.03, 0.3], Outcome.CONVERGED),  # 15 sigma across the prior's ray: not the target
+        # on the prior's ray, the other nearer its mean: the prior prefers the other fruit
+        ([0.53, 0.0, 0.3], [0.50, 0.0, 0.3], Outcome.AMBIGUOUS),
+        # on the prior's ray, the localised nearer: the prior prefers the fruit localised
+        ([0.49, 0.0, 0.3], [0.53, 0.0, 0.3], Outcome.CONVERGED),
+        # 15 sigma across the prior's ray: not the target
+        ([0.49, 0.0, 0.3], [0.50, 0.03, 0.3], Outcome.CONVERGED),
     ],
 )
-def test_a_fruit_localised_beside_another_the_prior_allows_as_well_is_ambiguous(other_m, expected):
+def test_a_fruit_localised_beside_another_the_prior_prefers_is_ambiguous(localised_m, other_m, expected):
     """A view found two fruit the estimate allowed; the views after it localised one. Only the
-    prior says which fruit is the target: when the other fits it about as well, the outcome
-    is ``ambiguous`` (exit 3), not ``converged``."""
-    target = np.array([0.49, 0.0, 0.3])
+    prior says which fruit is the target: when it finds the other more likely (its density at
+    the other's rough centre, spread included, against its density at the final estimate),
+    the outcome is ``ambiguous`` (exit 3), not ``converged``."""
+    localised = np.array(localised_m)
     prior = Belief(np.array([0.50, 0.0, 0.3]), np.diag([0.029**2, 0.002**2, 0.002**2]))  # along x
-    world = _ScriptedWorld(target, [target, np.array(other_m)])
-    loop = EpisodeLoop(world, prior, FilterConfig(gate_probability=None), ambiguity_ratio=20.0)
+    world = _ScriptedWorld(localised, [localised, np.array(other_m)])
+    loop = EpisodeLoop(world, prior, FilterConfig(gate_probability=None))
     loop.start()
     for _ in range(3):
-        loop.step(ViewPlan(world.p_world_camera, target, "optimal", True, 0.0))
+        loop.step(ViewPlan(world.p_world_camera, localised, "optimal", True, 0.0))
     result = loop.finish(Outcome.CONVERGED)
-    assert np.linalg.norm(result.final.mean - target) < 1e-3
+    assert np.linalg.norm(result.final.mean - localised) < 1e-3
     assert result.outcome == expected
+
+
+@pytest.mark.parametrize("odds", [0.0, -1.0, float("nan"), float("inf")])
+def test_identity_odds_must_be_a_positive_number(odds):
+    world = _ScriptedWorld(np.zeros(3), [])
+    prior = Belief(np.zeros(3), np.eye(3) * 1e-4)
+    with pytest.raises(ValueError, match="identity_odds"):
+        EpisodeLoop(world, prior, FilterConfig(gate_probability=None), identity_odds=odds)

@@ -142,8 +142,7 @@ class ViewPlanningEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._q_start = start.q_start.copy()
         p = self._parts
         self._loop = EpisodeLoop(
-            p.loop_world, start.prior, self.settings.filter, p.planner, None, p.claims, p.correlation,
-            self.settings.detector.ambiguity_ratio,
+            p.loop_world, start.prior, self.settings.filter, p.planner, None, p.claims, p.correlation
         )  # fmt: skip
         record = self._loop.start()
         return self._observation(), self._info(record)

@@ -276,7 +276,7 @@ def _run(
         on_view = None if recorder is None else recorder.on_view
         result = run_episode(
             parts.loop_world, parts.planner, prior, s.filter, s.episode.views, parts.stop, on_view,
-            parts.claims, parts.correlation, s.detector.ambiguity_ratio,
+            parts.claims, parts.correlation,
         )  # fmt: skip
     finally:
         parts.world.close()
