@@ -185,6 +185,30 @@ def test_an_estimate_that_stops_moving_on_accepted_views_is_stable():
     assert StopRules(sigma_m=1e-3).outcome(settled) is None  # the rule off
 
 
+def test_views_from_one_place_do_not_make_an_estimate_stable():
+    """A view taken where the last one was repeats its error (range-only: the apparent size's
+    bias), so the estimate holding still under it is no evidence: "stable" needs each of the
+    stable_views views at least stall_m from the one before (seen in truss_cluster, range,
+    seed 3025393228: views 6, 1 and 0.4 mm apart held an estimate 11.8 mm off claiming σmax
+    8.7 mm). Apart by 10 mm the same estimates are stable."""
+    from bve_mj.estimation.belief import Belief
+    from bve_mj.loop.episode import StopRules, ViewRecord
+
+    def views(y_m):
+        b = [Belief(np.array([0.4 + 1e-5 * i, 0.0, 0.2]), np.eye(3) * 1e-4) for i in range(len(y_m))]
+        return [
+            ViewRecord(i, np.array([0.2, y, 0.0]), None, True, 0.0, True, True, 1.0, b[i])
+            for i, y in enumerate(y_m)
+        ]  # σ 10 mm: not converged; every view accepted
+
+    rules = StopRules(sigma_m=1e-3, stable_m=5e-4, stable_views=3, stall_m=0.005)
+    assert rules.outcome(views([0.0, 0.01, 0.02, 0.03, 0.04])) == "stable"
+    assert rules.outcome(views([0.0, 0.01, 0.02, 0.03, 0.031])) is None  # the last 1 mm from the one before
+    assert rules.outcome(views([0.0, 0.003, 0.006, 0.009, 0.012])) is None  # 3 mm apart: moving, not stable
+    assert rules.outcome(views([0.0, 0.001, 0.002, 0.003, 0.004])) == "stalled"
+    assert StopRules(sigma_m=1e-3, stable_m=5e-4).outcome(views([0.0, 0.0, 0.0, 0.0, 0.0])) == "stable"
+
+
 def test_many_views_stop_when_the_view_stops_changing():
     """--views 10000 --approach used to take 10,001 views (283 s) and end with NEES 3727."""
     s = with_overrides(Settings(), episode={"approach": True, "views": 10000})

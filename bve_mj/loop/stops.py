@@ -21,7 +21,12 @@ class StopRules:
         sigma_m: the largest posterior standard deviation falls below this ("converged"), with
             at least ``min_accepted`` accepted measurements since the last belief reset.
         stable_m: the estimate moves less than this over ``stable_views`` views, each with an
-            accepted measurement ("stable"; a gated-out view does not count as agreement).
+            accepted measurement ("stable"; a gated-out view does not count as agreement) and,
+            when ``stall_m`` is set, each taken at least ``stall_m`` from the view before: a
+            view from the same place repeats that view's error (the apparent size's bias in
+            range-only episodes: seen in ``truss_cluster``, held still by three views within
+            8 mm of each other, 11.8 mm off claiming σmax 8.7 mm), so it shows nothing about
+            whether the estimate is stable.
         approach_distance_m: the camera is this close to the estimate ("approached").
         stall_m: the camera moved less than this over ``stable_views`` views, each planned
             and reached (a fallback or an IK failure does not count): the planner finds no
@@ -66,7 +71,11 @@ class StopRules:
                 np.linalg.norm(views[-i].belief.centre_m - views[-i - 1].belief.centre_m)
                 for i in range(1, n + 1)
             ]
-            if max(moves) <= self.stable_m:
+            apart = self.stall_m is None or all(
+                np.linalg.norm(views[-i].p_world_camera - views[-i - 1].p_world_camera) >= self.stall_m
+                for i in range(1, n + 1)
+            )
+            if max(moves) <= self.stable_m and apart:
                 return Outcome.STABLE
         return Outcome.STALLED if stalled else None
 
