@@ -68,8 +68,8 @@ _NOTES = {
     Outcome.APPROACH_BLOCKED: "the arm found no reachable pose closer to the fruit (the camera stopped "
     "moving): the fruit is localised but not approached",
     Outcome.UNRELIABLE: "the final estimate is not supported by the measurements (fewer than two "
-    "accepted since the last reset, or most recent ones gated out as disagreeing with it): do not "
-    "trust it",
+    "accepted since the last reset, most recent ones gated out as disagreeing with it, or views it "
+    "gated out supporting another answer as well): do not trust it",
     Outcome.INCOMPLETE: "every fruit tracked is localised, but something seen once (a fruit the "
     "detector refused from every later view, or a false detection) was never seen again: the "
     "zone may hold a fruit that is not localised",
