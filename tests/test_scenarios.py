@@ -58,6 +58,10 @@ def test_runner_table_and_json(tmp_path):
         r["outcome"] in ("converged", "stable", "approached") and r["nees"] > SILENT_NEES
         for r in clean["runs"]
     )
+    exit_0 = ("converged", "stable", "approached", "stalled", "max_views")
+    assert clean["answered_outside"] == sum(
+        r["outcome"] in exit_0 and r["nees"] > SILENT_NEES for r in clean["runs"]
+    )
     assert doc["settings"]["clean"]["measurement"]["kind"] == "camera"
 
 

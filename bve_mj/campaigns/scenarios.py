@@ -11,7 +11,9 @@ Per scenario: outcome counts, final error median / p95 / max, mean NEES, the sha
 inside the final 3σ ellipsoid (97.1% for an honest filter), and **silent failures**:
 episodes that claim success (``converged``, ``stable``, ``approached``) while the truth lies
 outside their final belief's 99.9% ellipsoid (NEES > χ²₃(0.999) = 16.27): confident wrong
-answers, the number that must be zero.
+answers, the number that must be zero. Beside it, **exit0 out** (``answered_outside``) counts
+the same for every outcome that exits 0 (``stalled`` and ``max_views`` too: they give an
+estimate, though they do not claim it is done).
 """
 
 from __future__ import annotations
@@ -154,6 +156,7 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
         "nees": nees,
         "sigma_max_mm": 1e3 * final.sigma_max_m,
         "silent_failure": bool(outcome.success and nees > SILENT_NEES),
+        "answered_outside": bool(outcome.localised and nees > SILENT_NEES),
         "detected_views": sum(v.measured for v in ep.result.views),
         "accepted_views": sum(v.accepted for v in ep.result.views),
         "truth_m": ep.truth.tolist(),
@@ -238,6 +241,7 @@ class SuiteResult:
             "radius_nees_mean": float(np.mean(r_nees)) if r_nees.size else math.nan,
             "error_to_crb_median": float(np.median(crb)) if crb.size else math.nan,
             "silent_failures": sum(bool(r.get("silent_failure")) for r in rows),
+            "answered_outside": sum(bool(r.get("answered_outside")) for r in rows),
             "views_median": float(np.median([r["views"] for r in ok])) if ok else math.nan,
             "wall_s": float(sum(r.get("wall_s", 0.0) for r in rows)),
             "runs": list(rows),
@@ -313,7 +317,7 @@ def format_suite(summaries: dict[str, dict[str, Any]], markdown: bool = False) -
     def num(x: Any, spec: str) -> str:
         return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
 
-    cols = ("scenario", "outcomes", "median mm", "p95 mm", "max mm", "NEES", "in3σ%", "silent",
+    cols = ("scenario", "outcomes", "median mm", "p95 mm", "max mm", "NEES", "in3σ%", "silent", "exit0 out",
             "r err mm", "r NEES", "err/CRB", "views", "wall s")  # fmt: skip
     rows = []
     for name, s in summaries.items():
@@ -325,6 +329,7 @@ def format_suite(summaries: dict[str, dict[str, Any]], markdown: bool = False) -
             num(e["median"], ".2f"), num(e["p95"], ".2f"), num(e["max"], ".2f"),
             num(s["nees_mean"], ".2f") + flag,
             num(s["inside_3sigma_pct"], ".0f"), str(s["silent_failures"]),
+            str(s.get("answered_outside", "-")),
             num(s.get("radius_error_mm", {}).get("median"), ".2f"), num(s.get("radius_nees_mean"), ".2f"),
             num(s.get("error_to_crb_median"), ".2f"), num(s["views_median"], ".1f"), num(s["wall_s"], ".1f"),
         ))  # fmt: skip
@@ -332,7 +337,9 @@ def format_suite(summaries: dict[str, dict[str, Any]], markdown: bool = False) -
         "error: final ‖estimate - truth‖ [mm]; NEES: mean (3 if honest; * outside the 95% band of the "
         "mean of that many honest episodes); in3σ%: truth inside the final 3σ ellipsoid (97.1% if "
         "honest); silent: a success outcome (converged, stable, approached) with the truth outside the "
-        "99.9% ellipsoid; r err: median |radius error| [mm] and r NEES its mean NEES (1 if honest); "
+        "99.9% ellipsoid; exit0 out: the same for every outcome that exits 0 (stalled and max_views "
+        "too: their estimate is an answer, though not a claim that it is done); r err: median |radius "
+        "error| [mm] and r NEES its mean NEES (1 if honest); "
         "err/CRB: median of the final error over √tr of the Cramér-Rao bound of the views taken; "
         "views: median per episode; wall: sum of the episodes' wall times"
     )
