@@ -50,13 +50,13 @@ def run_episode(
     update; ``stop`` may end it early. Outcome: the rule that ended it, "max_views", or
     "never_detected" when no view measured the fruit ("ambiguous" when some view saw more
     than one fruit the estimate allows, event ``ambiguous``); "unreliable" instead when the
-    final estimate is not supported by the measurements (:func:`supported`), or when two
-    measurements it gated out agree on another answer (:func:`~bve_mj.loop.verdict.contested`), or when a
-    measurement it gated out, with the accepted ones that agree with it, makes another answer
-    as well supported as the final one (:func:`~bve_mj.loop.verdict.second_answer`); "ambiguous" too
-    when a view found two fruit the estimate allowed, and the prior finds the other at least
-    ``identity_odds`` times as likely to be the target as the fruit localised (default 1: the
-    prior prefers the other; :func:`~bve_mj.loop.verdict.another_fruit_fits_the_prior`).
+    final estimate is not supported by the measurements (:func:`supported`), when two
+    measurements it gated out agree on another answer, or when one it gated out, with the
+    accepted ones that agree with it, makes another answer as well supported that the claim
+    all but excludes (:mod:`bve_mj.loop.verdict`); "ambiguous" too when a view found two
+    fruit the estimate allowed, and the prior finds the other at least ``identity_odds``
+    times as likely to be the target as the fruit localised (default 1: the prior prefers
+    the other).
 
     ``claims``: what the views record (and the stop rules test) beside the filter's own
     belief, which the planner plans with (see :class:`Claims`); None: the filter's belief.
