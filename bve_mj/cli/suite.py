@@ -175,8 +175,17 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     h, v = model.centre_bias_rel
     print(
         f"the fruit's own centre offset: σ {100 * h:.2f}% of its radius horizontally, {100 * v:.2f}% "
-        "vertically (added to the centre's covariance)"
+        "vertically over all fruits (added to the centre's covariance where what was seen is not known)"
     )
+    if model.centre_offset_terms:
+        terms = " + ".join(
+            f"{c:.3g}·{n}"
+            for c, n in zip(model.centre_offset_terms, ("1", "(k-1)²", "p̄²", "n̄²"), strict=True)
+        )
+        print(
+            f"  from what the detector saw: variance [share of radius²] = {terms} (k the fruit type's shape "
+            "index, p̄ the mean share of the outline not seen, n̄ the mean neighbour share of the views fused)"
+        )
     cc, rc = model.centre_correlation, model.radius_correlation
     print(
         f"views from nearby directions share their errors: correlation {cc.weight:.2f} (centre), "
@@ -188,8 +197,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         f"({report.get('refusal_fruits', 0)} fruits; scales the claimed covariance)"
     )
     print(
-        f"the errors are heavy-tailed: the claimed covariance × {model.tail_scale:.2f} holds 99.9% of the "
-        "views' errors in its 99.9% ellipsoid"
+        f"tail: the claimed covariance × {model.tail_scale:.2f} holds 99.9% of the errors of episode-like "
+        "estimates (3-6 views of a fruit fused) in its 99.9% ellipsoid"
     )
     write_json_atomic(out, model.to_json())
     print(f'wrote {out} (wall {data.wall_s:.0f} s); use it with [measurement] noise_model = "{out}"')

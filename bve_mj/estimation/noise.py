@@ -31,7 +31,17 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaig
   edge beside it) puts the fitted centre a little off its true centre in the world, mostly
   vertically. Views from elsewhere do not average it out: it is bounded, as a world-frame
   offset with σ ``centre_bias_rel`` (horizontal, vertical) times the fruit's radius, added
-  to the centre's covariance the filter reports (:meth:`NoiseModel.centre_bias_cov`).
+  to the centre's covariance the filter reports (:meth:`NoiseModel.centre_bias_cov`). How
+  far off a fruit's own centre is depends on what the detector sees of it: a round fruit
+  whose whole outline shows is off by a fifth of a percent of its radius, an elongated one
+  (a plum) or one whose outline its neighbours and the frame cut by three times that
+  (calibration seed 1). So the offset's variance, as a share of the radius², is
+  ``centre_offset_terms`` · (1, (k - 1)², p̄², n̄²) (:data:`OFFSET_FEATURES`: the fruit
+  type's shape index k, the mean share of the outline not seen p̄ = 1 - arc/360 and the
+  mean neighbour share n̄ of the views fused), fitted by maximum likelihood over the
+  calibration fruits and sized so that 97.1% of their offsets lie within its 3σ
+  (:meth:`NoiseModel.centre_offset_cov`). Where what was seen is not known, the bound over
+  all fruits (``centre_bias_rel``) stands.
 - the rest of a view's error is shared with views **from nearby directions** (they see
   nearly the same silhouette): the correlation ρ(θ) of two views' normalised errors against
   the angle between them, fitted per component (:mod:`bve_mj.estimation.view_correlation`;
@@ -45,9 +55,10 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaig
   b, fitted), and an episode's claimed covariance grows with it
   (:class:`bve_mj.loop.claims.Claims`).
 - the errors are **heavy-tailed**: beyond 3σ several times as often as a Gaussian's. The
-  claimed covariance is scaled by κ² (``tail_scale``, fitted) so that its 99.9% ellipsoid,
-  the one the scenario suite judges silent failures by, holds 99.9% of the calibration
-  views' errors; the filter itself fuses with the variances.
+  claimed covariance is scaled by κ² (``tail_scale``, fitted: :mod:`bve_mj.estimation.
+  noise_tail`) so that its 99.9% ellipsoid, the one the scenario suite judges silent
+  failures by, holds 99.9% of the errors of episode-like estimates (3-6 calibration views of
+  a fruit fused and claimed as the loop does); the filter itself fuses with the variances.
 
 The fitted model is a JSON file; the package ships one (``default``) and settings name it
 (``measurement.noise_model``). It holds the camera it was made with: a model for another
@@ -57,6 +68,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -68,7 +80,15 @@ from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.view_correlation import ViewCorrelation
 
-__all__ = ["FEATURES", "NoiseModel", "load_noise_model", "measure"]
+__all__ = [
+    "FEATURES",
+    "INNOVATION_PRIOR_DOF",
+    "OFFSET_FEATURES",
+    "NoiseModel",
+    "Outline",
+    "load_noise_model",
+    "measure",
+]
 
 FEATURES = ("floor", "fit", "partial", "elongation", "scale", "neighbour")
 
@@ -76,7 +96,33 @@ FEATURES = ("floor", "fit", "partial", "elongation", "scale", "neighbour")
 two were added holds the first four: the others count 0 in it."""
 
 
+OFFSET_FEATURES = ("floor", "shape", "partial", "neighbour")
+
+"""The terms of the fruit's own centre offset's variance, in the order of
+``NoiseModel.centre_offset_terms``."""
+
+
+INNOVATION_PRIOR_DOF = 6.0
+
+"""How much the noise model's word counts against a fruit's own innovations (degrees of
+freedom, :class:`bve_mj.loop.claims.Claims`; the calibration's tail scale claims as the loop
+does)."""
+
 _KIND = "bve_mj detector noise model"
+
+
+@dataclass(frozen=True)
+class Outline:
+    """What the detector saw of a fruit's outline in one view.
+
+    Attributes:
+        arc_deg: degrees of the outline the fit rests on (360: all of it).
+        neighbour_share: the share of the fitted circle's rim where a ripe neighbour touches
+            or overlaps the fruit (0-1).
+    """
+
+    arc_deg: float
+    neighbour_share: float = 0.0
 
 
 _CORRELATIONS = ("centre_correlation", "radius_correlation")
@@ -104,9 +150,12 @@ class NoiseModel:
         refusal_scale: b ≥ 0, a fruit's error variance against the share of its views the
             detector refused: × exp(b · share) (0 in a file that does not say).
         tail_scale: κ² ≥ 1, how much a claimed covariance grows for its 99.9% ellipsoid to
-            hold 99.9% of the calibration views' errors: they are heavy-tailed, and a
-            Gaussian with their variance holds the bulk, not the tail (1 in a file that
-            does not say).
+            hold 99.9% of the errors of episode-like estimates from the calibration views:
+            they are heavy-tailed, and a Gaussian with their variance holds the bulk, not the
+            tail (1 in a file that does not say).
+        centre_offset_terms: coefficients (4,) of the fruit's own offset's variance [share of
+            the radius²] on :data:`OFFSET_FEATURES`, or () (a file that does not say): the
+            offset is then ``centre_bias_rel`` whatever was seen.
     """
 
     centre_var_px2: tuple[float, ...]
@@ -123,6 +172,7 @@ class NoiseModel:
     radius_correlation: ViewCorrelation = field(default_factory=ViewCorrelation)
     refusal_scale: float = 0.0
     tail_scale: float = 1.0
+    centre_offset_terms: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("centre_var_px2", "radius_var_px2"):
@@ -141,12 +191,44 @@ class NoiseModel:
             raise ValueError("refusal_scale must be a finite number >= 0")
         if not (math.isfinite(self.tail_scale) and self.tail_scale >= 1.0):
             raise ValueError("tail_scale must be a finite number >= 1")
+        terms = self.centre_offset_terms
+        if terms and (
+            len(terms) != len(OFFSET_FEATURES) or not all(math.isfinite(x) and x >= 0.0 for x in terms)
+        ):
+            raise ValueError(
+                f"centre_offset_terms must be {len(OFFSET_FEATURES)} finite numbers >= 0, or none"
+            )
 
     def centre_bias_cov(self, radius_m: float) -> np.ndarray:
         """The covariance [m²] (3, 3) of the fruit's own offset of the fitted centre, world frame
         (z vertical), for a fruit of radius ``radius_m``."""
         h, v = self.centre_bias_rel
         return np.diag([(h * radius_m) ** 2, (h * radius_m) ** 2, (v * radius_m) ** 2])
+
+    @staticmethod
+    def offset_features(shape_index: float, outlines: Sequence[Outline]) -> np.ndarray:
+        """The terms of :data:`OFFSET_FEATURES` for a fruit of ``shape_index`` seen as
+        ``outlines`` (one per view fused), (4,)."""
+        partial = float(np.mean([max(0.0, 1.0 - o.arc_deg / 360.0) for o in outlines]))
+        neighbour = float(np.mean([min(max(o.neighbour_share, 0.0), 1.0) for o in outlines]))
+        return np.array([1.0, (shape_index - 1.0) ** 2, partial**2, neighbour**2])
+
+    def centre_offset_cov(
+        self, radius_m: float, shape_index: float, outlines: Sequence[Outline | None]
+    ) -> np.ndarray:
+        """The covariance [m²] (3, 3) of the own offset of a fruit of radius ``radius_m`` and
+        ``shape_index`` whose fused views saw ``outlines``: the bound over all fruits
+        (:meth:`centre_bias_cov`) unless the model is conditioned and every outline is known;
+        then its fitted share of the radius², shaped (horizontal, vertical) as that bound."""
+        known = [o for o in outlines if o is not None]
+        if not self.centre_offset_terms or not known or len(known) != len(outlines):
+            return self.centre_bias_cov(radius_m)
+        share = float(np.dot(self.centre_offset_terms, self.offset_features(shape_index, known)))
+        h, v = self.centre_bias_rel
+        mean = (2.0 * h * h + v * v) / 3.0
+        if mean <= 0.0:
+            return np.zeros((3, 3))
+        return np.diag([h * h, h * h, v * v]) * (share / mean) * radius_m**2
 
     @staticmethod
     def features(
@@ -198,7 +280,7 @@ class NoiseModel:
 
     def to_json(self) -> dict[str, Any]:
         """The file's content (:func:`load_noise_model` reads it back)."""
-        return {"kind": _KIND, "version": 3, "features": list(FEATURES), **asdict(self)}
+        return {"kind": _KIND, "version": 4, "features": list(FEATURES), **asdict(self)}
 
 
 def _default_path() -> Path:
@@ -243,6 +325,7 @@ def load_noise_model(name: str = "default") -> NoiseModel:
                 "centre_bias_rel": tuple(float(x) for x in values["centre_bias_rel"]),
                 "refusal_scale": float(values.get("refusal_scale", 0.0)),
                 "tail_scale": float(values.get("tail_scale", 1.0)),
+                "centre_offset_terms": tuple(float(x) for x in values.get("centre_offset_terms", ())),
                 **{k: ViewCorrelation(**values[k]) for k in _CORRELATIONS if k in values},
             }
         )

@@ -13,8 +13,8 @@ import numpy as np
 
 from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
-from bve_mj.estimation.metrics import chi2_quantile
-from bve_mj.estimation.noise import NoiseModel
+from bve_mj.estimation.noise import OFFSET_FEATURES, NoiseModel, Outline
+from bve_mj.estimation.noise_tail import tail_scale
 from bve_mj.estimation.view_correlation import ViewCorrelation, fit_view_correlation
 
 __all__ = ["GROSS_SIGMAS", "fit_noise_model", "noise_report"]
@@ -48,13 +48,14 @@ def fit_noise_model(
         model = _fit(_without_offsets(kept, offsets, f), camera, source)
     offsets = _fruit_offsets(kept, model, f)
     model = replace(model, centre_bias_rel=_offset_bound(offsets))
+    model = replace(model, centre_offset_terms=_offset_terms(offsets, _seen(kept), model))
     per_view = _without_offsets(kept, offsets, f)
     centre_corr, radius_corr = _view_correlations(per_view, model)
     model = replace(model, centre_correlation=centre_corr, radius_correlation=radius_corr)
     refused = [r for r in rows if not r.get("detected")]
     refusal, fruits = _refusal_scale([*refused, *kept], model)
     model = replace(model, refusal_scale=refusal)
-    model = replace(model, tail_scale=_tail_scale(kept, refused, model, f))
+    model = replace(model, tail_scale=tail_scale(kept, refused, model, f, lambda r: _row_sigmas(model, r)))
     report = noise_report(per_view, model)
     report["refusal_fruits"] = fruits
     report["gross_errors"] = len(det) - len(kept)
@@ -213,6 +214,63 @@ def _offset_bound(
     return (math.sqrt(hi * h), math.sqrt(hi * v))
 
 
+Fruit = tuple[Any, Any]
+
+
+def _seen(det: Sequence[dict[str, Any]]) -> dict[Fruit, tuple[float, list[Outline]]]:
+    """Per fruit (scenario, scene): its type's shape index and what its detections saw."""
+    out: dict[Fruit, tuple[float, list[Outline]]] = {}
+    for r in det:
+        key = (r.get("scenario"), r.get("scene_seed"))
+        _, outlines = out.setdefault(key, (float(r.get("fruit_shape_index", 1.0)), []))
+        outlines.append(Outline(float(r["arc_deg"]), float(r.get("neighbour_share", 0.0))))
+    return out
+
+
+def _offset_terms(
+    offsets: dict[Fruit, tuple[np.ndarray, np.ndarray, float]],
+    seen: dict[Fruit, tuple[float, list[Outline]]],
+    model: NoiseModel,
+) -> tuple[float, ...]:
+    """The coefficients (4,) of the fruit's own offset's variance on :data:`OFFSET_FEATURES`
+    [share of the radius²]: each fruit's offset b ~ N(0, g(x) r² S + C), S the spread's
+    (horizontal, vertical) shape of ``model.centre_bias_rel`` (mean 1), g(x) = c · x ≥ 0 over
+    its features x; c fitted by maximum likelihood, then scaled so that 97.1% of the offsets
+    lie within the 3σ ellipsoid (χ²₃(9), an honest 3σ ellipsoid's share), as the bound over
+    all fruits is. () with fewer than 20 fruits."""
+    from scipy.optimize import minimize
+
+    h, v = model.centre_bias_rel
+    mean = (2.0 * h * h + v * v) / 3.0
+    fruits = [key for key in offsets if key in seen]
+    if len(fruits) < 20 or mean <= 0.0:
+        return ()
+    shape = np.array([h * h, h * h, v * v]) / mean
+    X = np.array([NoiseModel.offset_features(*seen[key]) for key in fruits])
+    rel = [(offsets[key][0] / offsets[key][2], offsets[key][1] / offsets[key][2] ** 2) for key in fruits]
+
+    def distances(c: np.ndarray) -> np.ndarray:
+        return np.array(
+            [b @ np.linalg.solve(np.diag(g * shape) + C, b) for g, (b, C) in zip(X @ c, rel, strict=True)]
+        )
+
+    def nll(p: np.ndarray) -> float:
+        c = np.exp(p)
+        dets = [np.linalg.slogdet(np.diag(g * shape) + C)[1] for g, (_, C) in zip(X @ c, rel, strict=True)]
+        return float(0.5 * (np.sum(dets) + np.sum(distances(c))))
+
+    start = np.full(len(OFFSET_FEATURES), math.log(mean / len(OFFSET_FEATURES)))
+    best = minimize(nll, start, method="Nelder-Mead", options={"maxiter": 4000, "xatol": 1e-4, "fatol": 1e-6})
+    c = np.exp(best.x)
+    lo, hi = 0.0, 1.0
+    while np.mean(distances(hi * c) <= 9.0) < 0.971 and hi < 1e6:
+        hi *= 2.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if np.mean(distances(mid * c) <= 9.0) < 0.971 else (lo, mid)
+    return tuple(float(x) for x in hi * c)
+
+
 def _refusal_scale(rows: Sequence[dict[str, Any]], model: NoiseModel) -> tuple[float, int]:
     """b ≥ 0 and the number of fruits it was fitted to: per fruit (the rows of one scenario
     and scene, refused views included), the share ρ of its views the detector refused and
@@ -245,46 +303,6 @@ def _refusal_scale(rows: Sequence[dict[str, Any]], model: NoiseModel) -> tuple[f
 
     best = minimize(nll, np.zeros(2), method="Nelder-Mead")
     return max(float(best.x[1]), 0.0), len(share)
-
-
-TAIL_PROBABILITY = 0.999
-
-"""The share of views whose error the claimed covariance's ellipsoid at this probability must
-hold (the scenario suite's silent failures are judged at it)."""
-
-
-def _tail_scale(
-    kept: Sequence[dict[str, Any]], refused: Sequence[dict[str, Any]], model: NoiseModel, focal_px: float
-) -> float:
-    """κ² ≥ 1: how much the covariance a view claims (the per-view noise, the fruit's own
-    offset, the refusal scale of its fruit) must grow for its χ²₃ ellipsoid at
-    :data:`TAIL_PROBABILITY` to hold that share of the calibration views' errors: the
-    empirical quantile of their squared normalised errors over χ²₃'s.
-
-    The errors are heavy-tailed (a few fruits err several times what the variance fitted
-    over all fruits says, the same way in every view of them, so a handful of views of one
-    agree and do not average it out): a Gaussian with the right variance holds the bulk and
-    misses the tail; the claim is scaled to hold the tail."""
-    refused_of: dict[tuple[Any, Any], list[bool]] = {}
-    for r in [*kept, *refused]:
-        refused_of.setdefault((r.get("scenario"), r.get("scene_seed")), []).append(not r.get("detected"))
-    z2 = []
-    for r in kept:
-        sc, sr = _row_sigmas(model, r)
-        lateral = np.eye(2) * sc**2
-        if "camera_rotation" in r and "distance_m" in r:
-            R = np.asarray(r["camera_rotation"], dtype=float)[:, 1:3]
-            k = focal_px / r["distance_m"]  # the fruit's offset [m] seen across the view [px]
-            lateral = lateral + k**2 * (R.T @ model.centre_bias_cov(r["true_radius_m"]) @ R)
-        views = refused_of.get((r.get("scenario"), r.get("scene_seed")), [False])
-        scale = math.exp(model.refusal_scale * sum(views) / len(views))
-        e = np.array([-r["err_u_px"], -r["err_v_px"]])  # camera y left, z up: u right, v down
-        ea = r["err_alpha_px"] - model.radius_bias(r["radius_px"])
-        z2.append((float(e @ np.linalg.solve(lateral, e)) + (ea / sr) ** 2) / scale)
-    if len(z2) < 100:
-        return 1.0
-    ratio = float(np.quantile(z2, TAIL_PROBABILITY)) / float(chi2_quantile(TAIL_PROBABILITY, 3))
-    return max(1.0, ratio)
 
 
 def _components(det: Sequence[dict[str, Any]], model: NoiseModel) -> np.ndarray:

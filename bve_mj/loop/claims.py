@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
 from bve_mj.estimation import Belief
-from bve_mj.estimation.noise import NoiseModel
+from bve_mj.estimation.noise import NoiseModel, Outline
 
 __all__ = ["Claims"]
 
@@ -38,21 +39,35 @@ class Claims:
             fit_noise_model` fits b to the calibration fruits' errors against their refusal
             shares (``NoiseModel.refusal_scale``).
         tail_scale: κ² ≥ 1, the claimed covariance's last factor: the detector's errors are
-            heavy-tailed, and κ² makes the claim's 99.9% ellipsoid hold 99.9% of a
-            calibration view's error, not only its variance (``NoiseModel.tail_scale``).
+            heavy-tailed, and κ² makes the claim's 99.9% ellipsoid hold 99.9% of the errors
+            of episode-like estimates from the calibration views (``NoiseModel.tail_scale``).
+        offset_of: when set, the centre's offset covariance from what the detector saw of
+            the fruit in the views fused (one :class:`~bve_mj.estimation.noise.Outline` each,
+            None where not known: :meth:`bve_mj.estimation.noise.NoiseModel.centre_offset_cov`,
+            which falls back to ``centre_offset_cov``'s bound over all fruits when an outline
+            is missing); it replaces ``centre_offset_cov`` where :meth:`claim` is given the
+            outlines.
     """
 
     centre_offset_cov: np.ndarray | None = None
     innovation_prior_dof: float | None = None
     refusal_scale: float = 0.0
     tail_scale: float = 1.0
+    offset_of: Callable[[Sequence[Outline | None]], np.ndarray] | None = None
 
     @classmethod
-    def of_detector(cls, noise: NoiseModel, fruit_radius_m: float, innovation_prior_dof: float) -> Claims:
-        """The claims of a fruit of ``fruit_radius_m`` measured by the calibrated detector
-        ``noise``: its centre offset, refusal scale and tail scale, with innovation scaling."""
+    def of_detector(
+        cls, noise: NoiseModel, fruit_radius_m: float, innovation_prior_dof: float, shape_index: float = 1.0
+    ) -> Claims:
+        """The claims of a fruit of ``fruit_radius_m`` and ``shape_index`` measured by the
+        calibrated detector ``noise``: its centre offset (from what the detector saw of it,
+        when the claim is told), refusal scale and tail scale, with innovation scaling."""
         return cls(
-            noise.centre_bias_cov(fruit_radius_m), innovation_prior_dof, noise.refusal_scale, noise.tail_scale
+            noise.centre_bias_cov(fruit_radius_m),
+            innovation_prior_dof,
+            noise.refusal_scale,
+            noise.tail_scale,
+            partial(noise.centre_offset_cov, fruit_radius_m, shape_index),
         )
 
     def scale(self, innovations: Sequence[tuple[float, int]]) -> float:
@@ -63,12 +78,19 @@ class Claims:
         return (nu + sum(n for n, _ in innovations)) / (nu + sum(m for _, m in innovations))
 
     def claim(
-        self, belief: Belief, innovations: Sequence[tuple[float, int]], refused_share: float = 0.0
+        self,
+        belief: Belief,
+        innovations: Sequence[tuple[float, int]],
+        refused_share: float = 0.0,
+        outlines: Sequence[Outline | None] | None = None,
     ) -> Belief:
-        """The belief the episode claims, from the filter's, its accepted innovations and the
-        share of its views in which the detector refused the fruit."""
+        """The belief the episode claims, from the filter's, its accepted innovations, the
+        share of its views in which the detector refused the fruit and, when given, what the
+        detector saw of it in the views fused (``outlines``)."""
         cov = np.array(belief.cov) * self.scale(innovations)
-        if self.centre_offset_cov is not None:
+        if self.offset_of is not None and outlines is not None:
+            cov[:3, :3] += self.offset_of(outlines)
+        elif self.centre_offset_cov is not None:
             cov[:3, :3] += np.asarray(self.centre_offset_cov, dtype=float)
         if self.refusal_scale > 0.0:
             cov *= math.exp(self.refusal_scale * min(max(refused_share, 0.0), 1.0))

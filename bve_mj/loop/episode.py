@@ -217,7 +217,8 @@ class EpisodeLoop:
             claimed = belief
         else:  # the share of the views so far, this one included, in which nothing was measured
             refused = (sum(not v.measured for v in views) + (not measured)) / (len(views) + 1)
-            claimed = self.claims.claim(belief, innovations, refused)
+            outlines = [o.outline for o in self._accepted]
+            claimed = self.claims.claim(belief, innovations, refused, outlines)
         views.append(
             ViewRecord(
                 i, world.p_world_camera, status, feasible, plan_s, measured, accepted, nis, claimed, info,

@@ -18,6 +18,7 @@ import numpy as np
 from bve_mj.config import Settings, settings_to_dict, with_overrides
 from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.noise import INNOVATION_PRIOR_DOF
 from bve_mj.estimation.view_correlation import ViewCorrelation
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.episode import EpisodeResult, StopRules, ViewRecord, run_episode
@@ -219,11 +220,6 @@ def episode_constraints(s: Settings) -> tuple[ConstraintName, ...]:
     return names
 
 
-INNOVATION_PRIOR_DOF = 6.0
-"""How much the noise model's word counts against a fruit's own innovations (degrees of
-freedom, :class:`bve_mj.loop.claims.Claims`)."""
-
-
 def run_mujoco_episode(
     settings: Settings,
     seed: int,
@@ -344,6 +340,6 @@ def episode_parts(
     )
     claims, correlation = None, None
     if world.noise is not None:
-        claims = Claims.of_detector(world.noise, s.fruit.radius_m, INNOVATION_PRIOR_DOF)
+        claims = Claims.of_detector(world.noise, s.fruit.radius_m, INNOVATION_PRIOR_DOF, s.fruit.shape_index)
         correlation = (world.noise.centre_correlation, world.noise.radius_correlation)
     return EpisodeParts(world, loop_world, planner, stop, claims, correlation)

@@ -19,7 +19,7 @@ import numpy as np
 from bve_mj.config import FruitPrior, MeasurementConfig, Settings
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import BearingSizeModel, CameraModel, RangeModel, SizeModel
-from bve_mj.estimation.noise import NoiseModel, load_noise_model, measure
+from bve_mj.estimation.noise import NoiseModel, Outline, load_noise_model, measure
 from bve_mj.estimation.tracks import Sighting
 from bve_mj.perception.detection import Detection, NoDetection, Prediction
 from bve_mj.perception.protocol import DetectionRequest, Detector, EveryFruitDetector, detector_from_settings
@@ -275,9 +275,13 @@ class MujocoWorld:
             # encoder noise turns the camera (about 6 joints' errors): a white bearing error
             cov[:2, :2] += np.eye(2) * (2.5 * s.sensor.encoder_noise_rad) ** 2
             self.last.measurement = (z, cov)
+            # what the built-in detector saw (a detection with its own covariance is another
+            # detector's: the claim keeps the noise model's bound over all fruits for it)
+            own = getattr(det, "measurement_cov", None) is not None
+            outline = None if own else Outline(det.arc_deg, det.neighbour_share)
             if s.measurement.kind in ("camera", "auto"):
-                return Observation(z, BearingSizeModel(p, R, cov))
-            return Observation(z[2:], SizeModel(p, float(cov[2, 2])))
+                return Observation(z, BearingSizeModel(p, R, cov), outline)
+            return Observation(z[2:], SizeModel(p, float(cov[2, 2])), outline)
         if s.measurement.kind in ("camera", "auto"):  # auto: the camera here
             return Observation(det.p_camera, CameraModel(p, R, det.cov_camera))
         var = float(det.bearing_camera @ det.cov_camera @ det.bearing_camera)
@@ -334,6 +338,7 @@ class MujocoWorld:
                 "cov_camera_m2": det.cov_camera.tolist(),
                 "trimmed_fraction": det.trimmed_fraction,
                 "arc_deg": det.arc_deg,
+                "neighbour_share": det.neighbour_share,
                 "centre_fit_px": det.centre_fit_px,
                 "radius_fit_px": det.radius_fit_px,
             }

@@ -9,6 +9,7 @@ import numpy as np
 
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import BearingSizeModel, MeasurementModel
+from bve_mj.estimation.noise import Outline
 from bve_mj.estimation.tracks import Sighting
 from bve_mj.planning.plan import ViewPlan
 
@@ -41,10 +42,13 @@ class Scenario:
 
 @dataclass(frozen=True)
 class Observation:
-    """A measurement z of ``model`` taken from the camera's current pose."""
+    """A measurement z of ``model`` taken from the camera's current pose; ``outline``: what
+    the detector saw of the fruit's outline, where the world knows (a detector's, not a
+    synthetic world's)."""
 
     z: np.ndarray
     model: MeasurementModel
+    outline: Outline | None = None
 
 
 class World(Protocol):
