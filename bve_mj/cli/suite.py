@@ -198,7 +198,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     )
     print(
         f"tail: the claimed covariance × {model.tail_scale:.2f} holds 99.9% of the errors of episode-like "
-        "estimates (3-6 views of a fruit fused) in its 99.9% ellipsoid"
+        f"estimates (3-6 views of a fruit fused) in its 99.9% ellipsoid; × {model.view_tail_scale:.2f} those "
+        "of single views (what size-only episodes claim with)"
     )
     write_json_atomic(out, model.to_json())
     print(f'wrote {out} (wall {data.wall_s:.0f} s); use it with [measurement] noise_model = "{out}"')

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -14,7 +15,7 @@ import numpy as np
 from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.noise import OFFSET_FEATURES, NoiseModel, Outline
-from bve_mj.estimation.noise_tail import tail_scale
+from bve_mj.estimation.noise_tail import tail_scale, view_tail_scale
 from bve_mj.estimation.view_correlation import ViewCorrelation, fit_view_correlation
 
 __all__ = ["GROSS_SIGMAS", "fit_noise_model", "noise_report"]
@@ -55,7 +56,12 @@ def fit_noise_model(
     refused = [r for r in rows if not r.get("detected")]
     refusal, fruits = _refusal_scale([*refused, *kept], model)
     model = replace(model, refusal_scale=refusal)
-    model = replace(model, tail_scale=tail_scale(kept, refused, model, f, lambda r: _row_sigmas(model, r)))
+    sigmas = partial(_row_sigmas, model)
+    model = replace(
+        model,
+        tail_scale=tail_scale(kept, refused, model, f, sigmas),
+        view_tail_scale=view_tail_scale(kept, refused, model, f, sigmas),
+    )
     report = noise_report(per_view, model)
     report["refusal_fruits"] = fruits
     report["gross_errors"] = len(det) - len(kept)
@@ -232,7 +238,7 @@ def _offset_terms(
     seen: dict[Fruit, tuple[float, list[Outline]]],
     model: NoiseModel,
 ) -> tuple[float, ...]:
-    """The coefficients (4,) of the fruit's own offset's variance on :data:`OFFSET_FEATURES`
+    """The coefficients (3,) of the fruit's own offset's variance on :data:`OFFSET_FEATURES`
     [share of the radius²]: each fruit's offset b ~ N(0, g(x) r² S + C), S the spread's
     (horizontal, vertical) shape of ``model.centre_bias_rel`` (mean 1), g(x) = c · x ≥ 0 over
     its features x; c fitted by maximum likelihood, then scaled so that 97.1% of the offsets

@@ -57,11 +57,26 @@ class Claims:
 
     @classmethod
     def of_detector(
-        cls, noise: NoiseModel, fruit_radius_m: float, innovation_prior_dof: float, shape_index: float = 1.0
+        cls,
+        noise: NoiseModel,
+        fruit_radius_m: float,
+        innovation_prior_dof: float,
+        shape_index: float = 1.0,
+        *,
+        size_only: bool = False,
     ) -> Claims:
         """The claims of a fruit of ``fruit_radius_m`` and ``shape_index`` measured by the
         calibrated detector ``noise``: its centre offset (from what the detector saw of it,
-        when the claim is told), refusal scale and tail scale, with innovation scaling."""
+        when the claim is told), refusal scale and tail scale, with innovation scaling.
+
+        ``size_only``: the episode measures the apparent size alone (range): the calibration's
+        episode-like draws are of the camera measurement, so such an episode claims with the
+        single views' κ² and the offset's bound over all fruits (``view_tail_scale``)."""
+        if size_only:
+            return cls(
+                noise.centre_bias_cov(fruit_radius_m), innovation_prior_dof, noise.refusal_scale,
+                noise.view_tail_scale,
+            )  # fmt: skip
         return cls(
             noise.centre_bias_cov(fruit_radius_m),
             innovation_prior_dof,

@@ -340,6 +340,9 @@ def episode_parts(
     )
     claims, correlation = None, None
     if world.noise is not None:
-        claims = Claims.of_detector(world.noise, s.fruit.radius_m, INNOVATION_PRIOR_DOF, s.fruit.shape_index)
+        claims = Claims.of_detector(
+            world.noise, s.fruit.radius_m, INNOVATION_PRIOR_DOF, s.fruit.shape_index,
+            size_only=s.measurement.kind not in ("camera", "auto"),
+        )  # fmt: skip
         correlation = (world.noise.centre_correlation, world.noise.radius_correlation)
     return EpisodeParts(world, loop_world, planner, stop, claims, correlation)
