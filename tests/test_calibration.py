@@ -378,3 +378,15 @@ def test_converged_waits_for_enough_agreeing_views():
     ]
     assert rules.outcome(views) is None
     assert StopRules(sigma_m=0.0015).outcome([_view(0, tight)]) == "converged"
+
+
+def test_calibrate_says_what_the_shipped_model_claims_of_the_fruits_offset():
+    """The lines ``bve-mj calibrate`` prints of the offset, for a conditioned model and an old one."""
+    from bve_mj.cli.suite import offset_lines
+
+    model = load_noise_model("default")
+    lines = offset_lines(model)
+    assert len(lines) == 2 and "n̄²" in lines[1] and f"{model.centre_offset_terms[2]:.3g}" in lines[1]
+    from dataclasses import replace
+
+    assert len(offset_lines(replace(model, centre_offset_terms=()))) == 1

@@ -15,6 +15,7 @@ __all__ = ["cmd_calibrate", "cmd_scenarios"]
 
 if TYPE_CHECKING:
     from bve_mj.campaigns.fruit_suite import FruitSuiteResult
+    from bve_mj.estimation.noise import NoiseModel
 
 
 def cmd_scenarios(args: argparse.Namespace) -> int:
@@ -172,20 +173,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         )
     b0, b1 = model.radius_bias_px
     print(f"apparent radius bias {b0:+.3f} {b1:+.3f}·r_px/100 px (removed from every measurement)")
-    h, v = model.centre_bias_rel
-    print(
-        f"the fruit's own centre offset: σ {100 * h:.2f}% of its radius horizontally, {100 * v:.2f}% "
-        "vertically over all fruits (added to the centre's covariance where what was seen is not known)"
-    )
-    if model.centre_offset_terms:
-        terms = " + ".join(
-            f"{c:.3g}·{n}"
-            for c, n in zip(model.centre_offset_terms, ("1", "(k-1)²", "p̄²", "n̄²"), strict=True)
-        )
-        print(
-            f"  from what the detector saw: variance [share of radius²] = {terms} (k the fruit type's shape "
-            "index, p̄ the mean share of the outline not seen, n̄ the mean neighbour share of the views fused)"
-        )
+    for line in offset_lines(model):
+        print(line)
     cc, rc = model.centre_correlation, model.radius_correlation
     print(
         f"views from nearby directions share their errors: correlation {cc.weight:.2f} (centre), "
@@ -207,3 +196,20 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         write_json_atomic(json_path, {"model": model.to_json(), "report": report, "rows": list(data.rows)})
         print(f"wrote {json_path}")
     return EXIT_OK
+
+
+def offset_lines(model: NoiseModel) -> list[str]:
+    """What ``bve-mj calibrate`` says of the fruit's own centre offset in ``model``."""
+    h, v = model.centre_bias_rel
+    lines = [
+        f"the fruit's own centre offset: σ {100 * h:.2f}% of its radius horizontally, {100 * v:.2f}% "
+        "vertically over all fruits (added to the centre's covariance where the neighbours are not known)"
+    ]
+    if model.centre_offset_terms:
+        names = ("1", "(k-1)²", "n̄²")
+        terms = " + ".join(f"{c:.3g}·{n}" for c, n in zip(model.centre_offset_terms, names, strict=True))
+        lines.append(
+            f"  by the fruit: variance [share of radius²] = {terms} (k the fruit type's shape index, n̄ the "
+            "mean neighbour share of the views fused)"
+        )
+    return lines
