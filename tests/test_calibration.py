@@ -103,7 +103,7 @@ def test_the_fit_learns_the_fruits_own_offset_from_what_the_detector_saw(rng):
     assert len(model.centre_offset_terms) == 3 and model.centre_offset_terms[2] > 0.0
 
     def sigma_rel(neighbour):
-        cov = model.centre_offset_cov(0.03, 0.9, [Outline(360.0, neighbour)] * 3)
+        cov = model.centre_offset_cov(0.03, 0.9, [Outline(neighbour)] * 3)
         return math.sqrt(np.trace(cov) / 3) / 0.03
 
     whole, half = sigma_rel(0.0), sigma_rel(0.5)
@@ -112,7 +112,7 @@ def test_the_fit_learns_the_fruits_own_offset_from_what_the_detector_saw(rng):
     assert whole < math.sqrt((2 * h * h + v * v) / 3) < half
     # what was seen not known (or not in every view fused): the bound over all fruits
     np.testing.assert_array_equal(
-        model.centre_offset_cov(0.03, 0.9, [Outline(360.0), None]), model.centre_bias_cov(0.03)
+        model.centre_offset_cov(0.03, 0.9, [Outline(), None]), model.centre_bias_cov(0.03)
     )
 
 
@@ -204,7 +204,7 @@ def test_a_model_file_from_before_the_conditioned_offset_loads_with_the_bound_ov
     path.write_text(json.dumps({**old, "version": 3}))
     model = load_noise_model(str(path))
     assert model.centre_offset_terms == ()
-    cov = model.centre_offset_cov(0.03, 0.9, [Outline(300.0, 0.1)] * 3)
+    cov = model.centre_offset_cov(0.03, 0.9, [Outline(0.1)] * 3)
     np.testing.assert_array_equal(cov, model.centre_bias_cov(0.03))
     for bad in ([-1.0, 0.0, 0.0], [1e-4, 1e-4], [float("nan")] * 3, "many"):
         path.write_text(json.dumps({**data, "centre_offset_terms": bad}))
@@ -352,7 +352,7 @@ def test_claims_of_the_detector_carry_its_calibration():
     noise = load_noise_model("default")
     c = Claims.of_detector(noise, 0.03, 6.0, 0.9)
     np.testing.assert_array_equal(c.centre_offset_cov, noise.centre_bias_cov(0.03))
-    seen = [Outline(300.0, 0.2), Outline(250.0, 0.0)]
+    seen = [Outline(0.2), Outline(0.0)]
     np.testing.assert_array_equal(c.offset_of(seen), noise.centre_offset_cov(0.03, 0.9, seen))
     # an episode of the apparent size alone: the single views' κ² and the bound over all fruits
     size_only = Claims.of_detector(noise, 0.03, 6.0, 0.9, size_only=True)

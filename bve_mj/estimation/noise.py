@@ -115,12 +115,10 @@ class Outline:
     """What the detector saw of a fruit's outline in one view.
 
     Attributes:
-        arc_deg: degrees of the outline the fit rests on (360: all of it).
         neighbour_share: the share of the fitted circle's rim where a ripe neighbour touches
             or overlaps the fruit (0-1).
     """
 
-    arc_deg: float
     neighbour_share: float = 0.0
 
 

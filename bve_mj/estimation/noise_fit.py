@@ -229,7 +229,7 @@ def _seen(det: Sequence[dict[str, Any]]) -> dict[Fruit, tuple[float, list[Outlin
     for r in det:
         key = (r.get("scenario"), r.get("scene_seed"))
         _, outlines = out.setdefault(key, (float(r.get("fruit_shape_index", 1.0)), []))
-        outlines.append(Outline(float(r["arc_deg"]), float(r.get("neighbour_share", 0.0))))
+        outlines.append(Outline(float(r.get("neighbour_share", 0.0))))
     return out
 
 

@@ -107,7 +107,7 @@ def tail_scale(
                 float((z - H @ dx) @ W @ (z - H @ dx)) for H, W, z in terms
             )
             s2 = (INNOVATION_PRIOR_DOF + cost) / (INNOVATION_PRIOR_DOF + 3 * len(drawn))
-            outlines = [Outline(float(r["arc_deg"]), float(r.get("neighbour_share", 0.0))) for r in drawn]
+            outlines = [Outline(float(r.get("neighbour_share", 0.0))) for r in drawn]
             claim = (P[:3, :3] * s2 + model.centre_offset_cov(radius, shape_index, outlines)) * refusal
             nees[-1].append(float(dx[:3] @ np.linalg.solve(claim, dx[:3])))
     # the quantile rests on a handful of fruits: bound it by the fruits' bootstrap

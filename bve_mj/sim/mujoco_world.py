@@ -278,7 +278,7 @@ class MujocoWorld:
             # what the built-in detector saw (a detection with its own covariance is another
             # detector's: the claim keeps the noise model's bound over all fruits for it)
             own = getattr(det, "measurement_cov", None) is not None
-            outline = None if own else Outline(det.arc_deg, det.neighbour_share)
+            outline = None if own else Outline(det.neighbour_share)
             if s.measurement.kind in ("camera", "auto"):
                 return Observation(z, BearingSizeModel(p, R, cov), outline)
             return Observation(z[2:], SizeModel(p, float(cov[2, 2])), outline)
