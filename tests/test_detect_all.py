@@ -307,7 +307,7 @@ def test_an_image_without_ripe_colour_gives_nothing():
 
 
 def test_refusals_say_where_and_why(views):
-    n = 0
+    n = partial = 0
     for view in views["chain"] + views["cluster"] + views["stems"]:
         for found in view.found.values():
             for r in found.refused:
@@ -315,8 +315,13 @@ def test_refusals_say_where_and_why(views):
                     r.centre_px is not None and r.centre_px.shape == (2,) and np.all(np.isfinite(r.centre_px))
                 )
                 assert r.radius_px is not None and r.radius_px > 0 and len(r.reason) >= 20
+                # a fruit seen in part is evidence of a fruit; a merged blob or a speck is not
+                seen_in_part = r.reason.startswith("only") and "outline visible" in r.reason
+                seen_in_part |= "fix the target's centre only" in r.reason
+                assert r.partial == seen_in_part, r.reason
                 n += 1
-    assert n > 0
+                partial += r.partial
+    assert n > 0 and partial > 0
 
 
 # --------------------------------------------------------------------------- detect agrees

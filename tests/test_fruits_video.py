@@ -113,7 +113,7 @@ def test_every_fruit_video_reads_back_and_leaves_the_episode_unchanged(tmp_path,
 
     def strip(doc: Any) -> Any:
         if isinstance(doc, dict):
-            skip = ("wall_s", "timings_s", "plan_s", "track_s")
+            skip = ("wall_s", "timings_s", "plan_s", "track_s", "assign_s")
             return {k: strip(v) for k, v in doc.items() if k not in skip}
         return [strip(v) for v in doc] if isinstance(doc, list) else doc
 

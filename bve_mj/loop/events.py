@@ -17,6 +17,7 @@ EventKind = Literal[
     "false_detection",  # injected: the view measured another red object
     "outlier",  # injected: the measurement got a gross error
     "ik_failure",  # injected: the move's IK failed
+    "seen_in_part_reset",  # --fruits all: weak evidence of fruit seen in part broke a belief: restarted
 ]
 
 

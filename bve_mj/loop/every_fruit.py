@@ -10,8 +10,10 @@ offset, its innovations, the share of views that should have seen it and did not
 ``stop_sigma_m`` after at least ``converge_after`` detections. The episode ends
 ``converged`` when every track is, ``incomplete`` when every track is but a track was
 dropped on the way (seen once, never again from the views planned for it: a fruit the
-detector could not measure again, or a false detection), ``max_views`` when the budget runs
-out first, and ``never_detected`` when no view measured a fruit.
+detector could not measure again, or a false detection) or a fruit was seen only in part
+from several views and never measured (behind its neighbours:
+:mod:`bve_mj.estimation.unmeasured`), ``max_views`` when the budget runs out first, and
+``never_detected`` when no view measured a fruit.
 """
 
 from __future__ import annotations
@@ -24,17 +26,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bve_mj.errors import BveError
+from bve_mj.errors import BveError, EstimationError
+from bve_mj.estimation.assignment import Sighting
 from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.tracks import Track, Tracker, ViewTracking
+from bve_mj.estimation.unmeasured import explained_in_view, unexplained
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.planning.every_fruit import EXPLORE, FruitTarget, PlansForEveryFruit
 from bve_mj.planning.plan import PlanStatus, ViewPlan
-from bve_mj.sim.world import SeesEveryFruit
+from bve_mj.sim.world import ReportsUnmeasured, SeesEveryFruit
 
-__all__ = ["FruitState", "FruitsResult", "FruitsView", "claimed", "explored_deg", "run_every_fruit"]
+__all__ = [
+    "FruitState",
+    "FruitsResult",
+    "FruitsView",
+    "claimed",
+    "explored_deg",
+    "run_every_fruit",
+    "seen_in_part_id",
+    "seen_in_part_key",
+]
 
 
 @dataclass(frozen=True)
@@ -74,6 +88,9 @@ class FruitsView:
     fruits: tuple[FruitState, ...]
     world: dict[str, object] | None = None
     events: tuple[Event, ...] = ()
+    unmeasured: tuple[FruitState, ...] = ()
+    """The fruit seen in part from enough views and explained by no track after this view
+    (:func:`~bve_mj.estimation.unmeasured.unexplained`; never localised)."""
 
 
 @dataclass(frozen=True)
@@ -87,6 +104,11 @@ class FruitsResult:
     @property
     def final(self) -> tuple[FruitState, ...]:
         return self.views[-1].fruits if self.views else ()
+
+    @property
+    def unmeasured(self) -> tuple[FruitState, ...]:
+        """The fruit seen in part but never measured, at the end (see :class:`FruitsView`)."""
+        return self.views[-1].unmeasured if self.views else ()
 
 
 def claimed(track: Track, claims: Claims | None, stop_sigma_m: float, converge_after: int) -> FruitState:
@@ -118,6 +140,7 @@ def run_every_fruit(
     claims: Claims | None = None,
     on_view: Callable[[FruitsView], None] | None = None,
     zone: Belief | None = None,
+    seen_in_part: Tracker | None = None,
 ) -> FruitsResult:
     """Observe from the start pose, then up to ``steps`` times: plan for every fruit, move,
     observe, track; stop when every track is localised and the views span
@@ -125,17 +148,26 @@ def run_every_fruit(
     track is localised (or none exists) but the views do not span it, the view explores the
     zone (``zone``: a wide belief over it) from a new direction.
 
+    ``seen_in_part``: a tracker for the fruit the world found but could not measure (a world
+    that :class:`~bve_mj.sim.world.ReportsUnmeasured`): one confirmed there and explained by
+    no track keeps the episode from saying it found every fruit (``incomplete``).
+
     A planner that fails holds the camera where it is (event ``planner_failed``)."""
     t0 = time.perf_counter()
     views: list[FruitsView] = []
     span = tracker.config.explore_span_deg
     seen_from: list[np.ndarray] = []  # unit directions zone centre → camera of every view
 
+    tried: dict[int, int] = {}  # views planned for each fruit seen in part
+
     def look(i: int, plan: ViewPlan | None, target: int | None, events: list[Event]) -> None:
         sightings, camera = world.observe_all()
         t1 = time.perf_counter()
         step = tracker.step(sightings, camera, i, target)
         track_s = time.perf_counter() - t1
+        unmeasured: tuple[FruitState, ...] = ()
+        if seen_in_part is not None and isinstance(world, ReportsUnmeasured):
+            unmeasured = _seen_in_part(seen_in_part, world.unmeasured(), camera, i, tracker, events)
         alive = {t.id for t in tracker.tracks}
         for e in step.events:
             if e.kind in ("deleted", "merged"):
@@ -159,7 +191,7 @@ def run_every_fruit(
             FruitsView(
                 i, world.p_world_camera, target, None if plan is None else plan.status,
                 True if plan is None else plan.feasible, 0.0 if plan is None else plan.plan_s,
-                track_s, len(sightings), step, states, info, tuple(events),
+                track_s, len(sightings), step, states, info, tuple(events), unmeasured,
             )
         )  # fmt: skip
         if on_view is not None:
@@ -168,9 +200,18 @@ def run_every_fruit(
     look(0, None, None, [])
     outcome: Outcome | None = None
 
+    def pending() -> list[FruitState]:
+        """The fruit seen in part still worth a view planned for them."""
+        return [h for h in views[-1].unmeasured if tried.get(h.id, 0) < tracker.config.delete_misses]
+
     def done() -> bool:
         states = views[-1].fruits
-        return bool(states) and all(s.localised for s in states) and explored_deg(seen_from) >= span
+        return (
+            bool(states)
+            and all(s.localised for s in states)
+            and explored_deg(seen_from) >= span
+            and not pending()
+        )
 
     for i in range(1, steps + 1):
         if done():
@@ -185,7 +226,12 @@ def run_every_fruit(
             for s in states
         ]  # fmt: skip
         events: list[Event] = []
-        if all(s.localised for s in states):  # every fruit found so far: look for others
+        parts = pending() if all(s.localised for s in states) else []
+        if parts:  # every fruit tracked is localised: measure those seen in part
+            targets += [
+                FruitTarget(seen_in_part_key(h.id), h.belief, False, h.belief.sigma_max_m) for h in parts
+            ]
+        if all(s.localised for s in states) and not parts:  # look for fruit not yet seen
             plan, target = _explore(planner, zone, tracker, world, i, events), EXPLORE
         else:
             t_plan = time.perf_counter()
@@ -199,6 +245,9 @@ def run_every_fruit(
                 )  # fmt: skip
                 target = worst.id
                 events.append(Event("planner_failed", f"{type(exc).__name__}: {exc}"))
+        if target is not None and target <= seen_in_part_key(0):
+            h_id = seen_in_part_id(target)
+            tried[h_id] = tried.get(h_id, 0) + 1
         world.move_camera(plan)
         look(i, plan, target, events)
     else:
@@ -206,9 +255,43 @@ def run_every_fruit(
             outcome = Outcome.CONVERGED
     if outcome is None:
         outcome = Outcome.MAX_VIEWS if any(v.detections for v in views) else Outcome.NEVER_DETECTED
-    elif outcome == Outcome.CONVERGED and tracker.dropped:
+    elif outcome == Outcome.CONVERGED and (tracker.dropped or views[-1].unmeasured):
         outcome = Outcome.INCOMPLETE
     return FruitsResult(tuple(views), time.perf_counter() - t0, outcome)
+
+
+def seen_in_part_key(h_id: int) -> int:
+    """The planner key (and ``planned_for``) of a view planned for fruit ``h_id`` seen in part:
+    below :data:`~bve_mj.planning.every_fruit.EXPLORE`, apart from the track ids (≥ 0)."""
+    return EXPLORE - 1 - h_id
+
+
+def seen_in_part_id(key: int) -> int:
+    """The fruit seen in part a planner key is for (inverse of :func:`seen_in_part_key`)."""
+    return EXPLORE - 1 - key
+
+
+def _seen_in_part(
+    seen_in_part: Tracker,
+    weak: list[Sighting],
+    camera: BearingSizeModel,
+    iteration: int,
+    tracker: Tracker,
+    events: list[Event],
+) -> tuple[FruitState, ...]:
+    """Track this view's fruit seen in part (those that are not a tracked fruit partly hidden
+    in this view) and return those confirmed in the zone that no track explains. Weak
+    evidence never ends an episode: a belief it breaks (a radius driven through zero)
+    restarts it (event ``seen_in_part_reset``)."""
+    weak = [w for w in weak if not explained_in_view(w, tracker.tracks)]
+    try:
+        seen_in_part.step(weak, camera, iteration)
+        found = unexplained(seen_in_part.tracks, tracker.tracks, tracker.zone_centre_m, tracker.config.zone_m)
+    except (EstimationError, np.linalg.LinAlgError) as exc:
+        events.append(Event("seen_in_part_reset", f"{type(exc).__name__}: {exc}"))
+        seen_in_part.tracks.clear()
+        return ()
+    return tuple(FruitState(h.id, h.belief, h.confirmed, h.hits, h.misses, h.expected, False) for h in found)
 
 
 def _explore(

@@ -150,8 +150,9 @@ class FruitsEpisode:
         """The ``--json`` document of ``--fruits all``: settings, seed, per view the tracks and
         what the tracker did, and ``fruits``: per true ripe fruit its truth, radius and the
         matched track's estimate, radius, error, NEES and whether it is localised;
-        ``unmatched_tracks`` (false positives) and ``other_tracks`` (on fruit less ripe or
-        outside the zone)."""
+        ``unmatched_tracks`` (false positives), ``other_tracks`` (on fruit less ripe or
+        outside the zone) and ``seen_in_part`` (fruit seen only in part from several views,
+        never measured, explained by no track: where the episode knows it missed one)."""
         matches, other, false = self.matches()
         views = []
         for v in self.result.views:
@@ -163,6 +164,7 @@ class FruitsEpisode:
                     "plan_status": v.plan_status,
                     "plan_s": v.plan_s,
                     "track_s": v.track_s,
+                    "assign_s": v.tracking.assign_s,
                     "detections": v.detections,
                     "assigned": [list(p) for p in v.tracking.assigned],
                     "started": [list(p) for p in v.tracking.started],
@@ -199,6 +201,7 @@ class FruitsEpisode:
             "fruits": fruits,
             "unmatched_tracks": [_track_json(t) for t in false],
             "other_tracks": [_track_json(t) for t in other],
+            "seen_in_part": [_track_json(t) for t in self.result.unmeasured],
             "harvest": None if self.harvest is None else self.harvest.to_json(),
             "outcome": self.result.outcome,
             "wall_s": self.result.wall_s,
@@ -316,11 +319,13 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         planner = PatternPlanner(make(), zone_belief)
     update = filter_update(s.filter.kind, s.filter.ekf_iterations)
     tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr)
+    seen_in_part = Tracker(s.tracking, zone, radius_prior, update, visible)
     claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF)
     try:
         result = run_every_fruit(
             world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims,
             on_view=None if recorder is None else recorder.on_view, zone=zone_belief,
+            seen_in_part=seen_in_part,
         )  # fmt: skip
         visits = None
         if s.episode.approach and result.final:

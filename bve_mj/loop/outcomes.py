@@ -70,9 +70,10 @@ _NOTES = {
     Outcome.UNRELIABLE: "the final estimate is not supported by the measurements (fewer than two "
     "accepted since the last reset, most recent ones gated out as disagreeing with it, or views it "
     "gated out supporting another answer as well): do not trust it",
-    Outcome.INCOMPLETE: "every fruit tracked is localised, but something seen once (a fruit the "
-    "detector refused from every later view, or a false detection) was never seen again: the "
-    "zone may hold a fruit that is not localised",
+    Outcome.INCOMPLETE: "every fruit tracked is localised, but the zone holds a fruit that is not: "
+    "something seen once (a fruit the detector refused from every later view, or a false "
+    "detection) was never seen again, or a fruit was seen only in part, from several views, and "
+    "never measured (seen_in_part in the JSON)",
     Outcome.STALLED: "the camera stopped moving (no better reachable view): more views would only "
     "repeat the same measurement",
 }

@@ -43,11 +43,14 @@ class Refusal:
             when the whole image was refused (wrong shape or dtype).
         radius_px: that circle's radius [px]; None with ``centre_px``.
         reason: why (as :class:`~bve_mj.perception.detection.NoDetection` says it).
+        partial: a fruit seen only in part (``NoDetection.partial``): evidence of a fruit
+            that could not be measured, where a fragment or a merged blob is none.
     """
 
     centre_px: np.ndarray | None
     radius_px: float | None
     reason: str
+    partial: bool = False
 
 
 @dataclass(frozen=True)
@@ -112,7 +115,8 @@ def detect_all(
             if max_range_m is None or det.range_m <= max_range_m:
                 detections.append(det)
         else:
-            refused.append(Refusal(outline.circle.centre.copy(), outline.circle.radius, det.reason))
+            circle = outline.circle
+            refused.append(Refusal(circle.centre.copy(), circle.radius, det.reason, det.partial))
     return FruitDetections(tuple(detections), tuple(refused))
 
 

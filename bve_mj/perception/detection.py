@@ -94,10 +94,15 @@ class NoDetection:
 
     ``candidates``: when ambiguous, the rough 3-D centres of the fruit the estimate allowed,
     each (p_camera (3,), cov_camera (3, 3)) [m, m²] in the camera frame: the loop checks at
-    the end whether the fruit it localised was told apart from them."""
+    the end whether the fruit it localised was told apart from them.
+
+    ``partial``: a fruit was found but seen only in part (too little of its outline, or arcs
+    that pin its centre down too loosely): something ripe is there that could not be
+    measured, not a fragment, a speck or a merged blob."""
 
     reason: str
     candidates: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
+    partial: bool = False
 
     @property
     def ambiguous(self) -> bool:

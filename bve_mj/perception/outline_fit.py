@@ -113,7 +113,8 @@ def measure_outline(
     if seen_deg < cfg.min_arc_deg:
         return NoDetection(
             f"only {seen_deg:.0f} deg of the target's outline visible (< {cfg.min_arc_deg:.0f}): "
-            "hidden by its neighbours or occluders"
+            "hidden by its neighbours or occluders",
+            partial=True,
         )
     uv = outline.points
     on_hull = hull_points(uv)
@@ -153,7 +154,9 @@ def measure_outline(
     on_outline = keep | ((resid_px > 0.0) & (resid_px < cfg.outlier_px + 0.5 * slack_px))
     arc = _arc_deg(uv[on_outline], centre)
     if arc < cfg.min_arc_deg:
-        return NoDetection(f"only {arc:.0f} deg of the target's outline visible (< {cfg.min_arc_deg:.0f})")
+        return NoDetection(
+            f"only {arc:.0f} deg of the target's outline visible (< {cfg.min_arc_deg:.0f})", partial=True
+        )
     rms = float(np.sqrt(np.mean(resid_px[keep] ** 2)))
     if rms > cfg.max_fit_rms_px:
         return NoDetection(f"merged blob or not a fruit: its outline fits a circle to {rms:.2f} px rms")
@@ -180,7 +183,8 @@ def measure_outline(
     if lat_fit * f > cfg.max_fit_sigma_px + 0.25 * slack_px:
         return NoDetection(
             f"the visible arcs fix the target's centre only to {lat_fit * f:.1f} px (1 sigma): too little "
-            "of its outline, or a ragged one"
+            "of its outline, or a ragged one",
+            partial=True,
         )
     if expected_radius_px is not None and math.isfinite(expected_radius_px) and expected_radius_px > 0:
         ratio = radius_px / expected_radius_px

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from bve_mj.loop.every_fruit import FruitState, FruitsView
+from bve_mj.loop.every_fruit import FruitState, FruitsView, seen_in_part_id
 from bve_mj.planning.every_fruit import EXPLORE
 from bve_mj.reporting.outside_view import OutsideVideo
 from bve_mj.reporting.overlay import _FONT, _PATH, _TRUTH, _WHITE, _i, _mm, _shade, _View
@@ -292,6 +292,8 @@ class FruitsRecorder(OutsideVideo):
             why = "the start pose"
         elif view.planned_for == EXPLORE:
             why = "planned to explore the work zone"
+        elif view.planned_for < EXPLORE:
+            why = f"planned for fruit #{seen_in_part_id(view.planned_for)} seen in part"
         else:
             why = f"planned for track #{view.planned_for}"
         every = self.world.last.every

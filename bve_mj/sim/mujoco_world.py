@@ -21,6 +21,7 @@ from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import BearingSizeModel, CameraModel, RangeModel, SizeModel
 from bve_mj.estimation.noise import NoiseModel, Outline, load_noise_model, measure
 from bve_mj.estimation.tracks import Sighting
+from bve_mj.estimation.unmeasured import unmeasured_sighting
 from bve_mj.perception.detection import Detection, NoDetection, Prediction
 from bve_mj.perception.protocol import DetectionRequest, Detector, EveryFruitDetector, detector_from_settings
 from bve_mj.planning.plan import ViewPlan
@@ -152,6 +153,7 @@ class MujocoWorld:
         self._keep_images = keep_images
         self._on_step = on_step
         self.last = _Last()
+        self._unmeasured: list[Sighting] = []
 
     def _settings_detector(self) -> Detector:
         """The detector ``detector.kind`` names; synthetic boxes get their own stream (spawned
@@ -310,7 +312,19 @@ class MujocoWorld:
             z, cov = measure(det, self.noise, s.fruit.shape_index, self.intrinsics.focal_px)
             cov[:2, :2] += np.eye(2) * (2.5 * s.sensor.encoder_noise_rad) ** 2
             sightings.append(Sighting(z, BearingSizeModel(p, R, cov)))
+        self._unmeasured = []
+        for r in found.refused:
+            if r.partial and r.centre_px is not None and r.radius_px is not None:
+                ray = self.intrinsics.rays(r.centre_px)[0]
+                weak = unmeasured_sighting(ray, r.radius_px, self.intrinsics.focal_px, p, R)
+                if weak is not None:
+                    self._unmeasured.append(weak)
         return sightings, BearingSizeModel(p, R, np.eye(3) * 1e-8)
+
+    def unmeasured(self) -> list[Sighting]:
+        """The fruit the last :meth:`observe_all` found but saw only in part, as weak sightings
+        (:func:`~bve_mj.estimation.unmeasured.unmeasured_sighting`)."""
+        return list(self._unmeasured)
 
     def view_info(self) -> dict[str, Any]:
         """What happened in the last view, JSON-ready."""

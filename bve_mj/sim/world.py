@@ -17,6 +17,7 @@ __all__ = [
     "HoldsOnFailedMove",
     "Observation",
     "ReadsEncoders",
+    "ReportsUnmeasured",
     "ReportsViews",
     "Scenario",
     "SeesEveryFruit",
@@ -137,4 +138,15 @@ class SeesEveryFruit(Protocol):
 
     def view_info(self) -> dict[str, Any]:
         """The last view, JSON-ready."""
+        ...
+
+
+@runtime_checkable
+class ReportsUnmeasured(Protocol):
+    """A world whose every-fruit views also report the fruit its detector found but could not
+    measure (seen only in part: :mod:`bve_mj.estimation.unmeasured`)."""
+
+    def unmeasured(self) -> list[Sighting]:
+        """The weak sightings of the fruit the last :meth:`SeesEveryFruit.observe_all` saw in
+        part, in the same camera pose as its sightings."""
         ...

@@ -1,0 +1,143 @@
+"""Fruit seen only in part: the evidence of a ripe fruit the detector could not measure.
+
+A fruit behind its neighbours shows a short stretch of outline: the detector finds it (its
+arcs group into a fruit) but refuses to measure it (too little outline, or arcs that pin
+its centre down too loosely: :attr:`~bve_mj.perception.detection.NoDetection.partial`). Such
+a refusal is not a measurement of the fruit, but it is evidence that one is there. Each is
+turned into a weak sighting (:func:`unmeasured_sighting`): the bearing of the centre of the
+circle its arcs lie on, and its apparent radius, with a noise measured against the truth
+(the constants below). A second :class:`~bve_mj.estimation.tracks.Tracker` associates them
+across views as it does detections: a fruit seen in part from ``confirm_hits`` views at one
+place in 3-D is confirmed, a stem crossing seen once is not.
+
+A confirmed one that no measured track explains (:func:`unexplained`) is a ripe fruit the
+episode saw but did not localise: the every-fruit loop then does not say it found every
+fruit (``incomplete``, not ``converged``), and reports where it is.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from bve_mj.estimation.assignment import Sighting
+from bve_mj.estimation.ekf import nis_threshold
+from bve_mj.estimation.models import BearingSizeModel
+from bve_mj.estimation.tracks import Track
+
+__all__ = [
+    "CENTRE_SIGMA_REL",
+    "EXPLAINED_PROBABILITY",
+    "IN_VIEW_SHARE",
+    "NO_NEIGHBOUR_SHARE",
+    "RADIUS_SIGMA_REL",
+    "explained_in_view",
+    "unexplained",
+    "unmeasured_sighting",
+]
+
+CENTRE_SIGMA_REL = 0.32
+"""1σ of each image coordinate of a partly seen fruit's circle centre, as a share of the
+fruit's true apparent radius: the rms over 2,766 such refusals within one radius of a true
+fruit in 100 every-fruit episodes (the five truss scenarios, 20 seeds of 8642;
+``python benchmarks/bench_unmeasured.py`` measures it). Its median is 0.13: heavy-tailed."""
+
+RADIUS_SIGMA_REL = 0.45
+"""1σ of a partly seen fruit's apparent radius, relative: the rms of (circle radius / true
+apparent radius - 1) over the same refusals (median -0.07; 5% of them under a fifth of the
+true radius: a short arc is often a fragment's curve). The range its size gives is that
+uncertain: what fixes the fruit in 3-D is its bearing from several views."""
+
+IN_VIEW_SHARE = 0.6
+"""A weak sighting whose circle's centre lies within this share of a tracked fruit's apparent
+radius of that fruit's image centre is that fruit, partly hidden (:func:`explained_in_view`)."""
+
+NO_NEIGHBOUR_SHARE = 0.5
+"""Two fruit touch at the sum of their radii; a fruit seen in part whose centre lies within a
+track's radius plus this share of its own radius of the track's centre is no neighbour but
+that track's fruit, its circle fitted to a part of it (a short arc's circle is often too
+small, which puts it too far along the ray). Half a radius leaves room for the error of a
+real neighbour's estimate."""
+
+EXPLAINED_PROBABILITY = 0.999
+"""A fruit seen in part is a measured track's fruit when their centres agree at this level
+(χ², 3 components, both covariances), or when its centre lies inside the track's sphere."""
+
+
+def unmeasured_sighting(
+    bearing_camera: np.ndarray,
+    radius_px: float,
+    focal_px: float,
+    p_world_camera: np.ndarray,
+    R_world_camera: np.ndarray,
+) -> Sighting | None:
+    """The weak sighting z = (t_y/t_x, t_z/t_x, α) of a fruit seen in part, from the circle its
+    arcs lie on: the unit ray through its centre in the camera frame (x optical axis, y
+    left, z up) and its radius [px] (α = atan(r / f)), with the noise of
+    :data:`CENTRE_SIGMA_REL` and :data:`RADIUS_SIGMA_REL`; None for a circle that is no fruit
+    in front of the camera (a ray not ahead, a radius not > 0)."""
+    b = np.asarray(bearing_camera, dtype=float)
+    if b.shape != (3,) or not np.all(np.isfinite(b)) or b[0] <= 1e-3 * float(np.linalg.norm(b)):
+        return None
+    if not (math.isfinite(radius_px) and radius_px > 0.0 and focal_px > 0.0):
+        return None
+    alpha = math.atan(radius_px / focal_px)
+    s_c = CENTRE_SIGMA_REL * radius_px / focal_px
+    s_a = RADIUS_SIGMA_REL * alpha
+    cov = np.diag([s_c**2, s_c**2, s_a**2])
+    z = np.array([b[1] / b[0], b[2] / b[0], alpha])
+    return Sighting(z, BearingSizeModel(p_world_camera, R_world_camera, cov))
+
+
+def explained_in_view(sighting: Sighting, tracks: Sequence[Track]) -> bool:
+    """Whether a weak sighting is the part of a tracked fruit that shows in its view: the
+    centre of its circle within :data:`IN_VIEW_SHARE` of a track's apparent radius of that
+    track's image (a tracked fruit partly hidden in one view is no new fruit; a fruit whose
+    centre hides behind a tracked one's middle shows too little to count anyway)."""
+    m = sighting.model
+    for t in tracks:
+        d = m.R_world_camera.T @ (t.centre_m - m.p_world_camera)
+        rho = float(np.linalg.norm(d))
+        if d[0] <= 1e-3 * rho or not 0.0 < t.radius_m < rho:
+            continue
+        alpha = math.asin(t.radius_m / rho)
+        offset = math.hypot(sighting.z[0] - d[1] / d[0], sighting.z[1] - d[2] / d[0])
+        if offset < IN_VIEW_SHARE * math.tan(alpha):
+            return True
+    return False
+
+
+def unexplained(
+    seen_in_part: Sequence[Track], tracks: Sequence[Track], zone_centre_m: np.ndarray, zone_m: float
+) -> list[Track]:
+    """The confirmed fruit seen in part that lie in the work zone (centre within ``zone_m`` of
+    ``zone_centre_m``) and that no measured track explains: their centre farther from every
+    track's than a neighbour's could lie (the track's radius and :data:`NO_NEIGHBOUR_SHARE`
+    of its own: fruit do not interpenetrate) and disagreeing with every track's centre at
+    :data:`EXPLAINED_PROBABILITY` (χ², 3 components, the two covariances summed)."""
+    limit = nis_threshold(EXPLAINED_PROBABILITY, 3)
+    out = []
+    for h in seen_in_part:
+        if not h.confirmed or not np.all(np.isfinite(h.belief.mean)):
+            continue
+        if float(np.linalg.norm(h.centre_m - zone_centre_m)) > zone_m:
+            continue
+        explained = False
+        for t in tracks:
+            d = h.centre_m - t.centre_m
+            if float(np.linalg.norm(d)) < t.radius_m + NO_NEIGHBOUR_SHARE * h.radius_m:
+                explained = True
+                break
+            S = h.belief.cov[:3, :3] + t.belief.cov[:3, :3]
+            try:
+                chi2 = float(d @ np.linalg.solve(S, d))
+            except np.linalg.LinAlgError:
+                continue
+            if chi2 <= limit:
+                explained = True
+                break
+        if not explained:
+            out.append(h)
+    return out

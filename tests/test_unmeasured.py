@@ -1,0 +1,109 @@
+"""Fruit seen only in part: weak sightings from the detector's refusals, confirmed across views
+by a tracker of their own, and held against the measured tracks (:mod:`bve_mj.estimation.
+unmeasured`); the every-fruit loop does not say it found every fruit while one stands."""
+
+import math
+
+import numpy as np
+import pytest
+
+from bve_mj.config import TrackingConfig
+from bve_mj.estimation import Belief, filter_update
+from bve_mj.estimation.tracks import Track, Tracker
+from bve_mj.estimation.unmeasured import (
+    CENTRE_SIGMA_REL,
+    RADIUS_SIGMA_REL,
+    unexplained,
+    unmeasured_sighting,
+)
+from bve_mj.geometry import camera_rotation
+
+F = 466.0
+FRUIT = np.array([0.5, 0.0, 0.3])
+RADIUS = 0.03
+CFG = TrackingConfig(fruits="all", zone_m=0.2)
+PRIOR = (0.03, 0.03 * 0.15 / math.sqrt(3.0))
+
+
+def _views(k):
+    """k camera positions on an arc 0.3 m in front of the fruit (robot side, -x), looking at it."""
+    out = []
+    for i in range(k):
+        a = math.radians(-40.0 + 80.0 * i / max(k - 1, 1))
+        d = np.array([-math.cos(a), math.sin(a), 0.15 * math.sin(2.1 * i)])
+        p = FRUIT + 0.3 * d / np.linalg.norm(d)
+        out.append((p, camera_rotation(p, FRUIT)))
+    return out
+
+
+def _partial(centre, radius, p, R, rng):
+    """A weak sighting of a fruit seen in part: its true circle, off by the calibrated noise."""
+    t = R.T @ (np.asarray(centre) - p)
+    r_px = F * math.tan(math.asin(radius / np.linalg.norm(t)))
+    ray = t / np.linalg.norm(t)
+    # the circle's centre off across the ray, its radius off relatively
+    across = np.cross(ray, [0.0, 0.0, 1.0])
+    across /= np.linalg.norm(across)
+    up = np.cross(across, ray)
+    off = rng.normal(0.0, CENTRE_SIGMA_REL * r_px / F, 2)
+    ray = ray + off[0] * across + off[1] * up
+    r_off = r_px * (1.0 + rng.normal(0.0, RADIUS_SIGMA_REL))
+    return unmeasured_sighting(ray / np.linalg.norm(ray), r_off, F, p, R)
+
+
+def _seen_in_part(views, rng, centre=FRUIT):
+    tracker = Tracker(CFG, FRUIT, PRIOR, filter_update("ekf", 10), lambda c, r, m: np.ones(len(c), bool))
+    for i, (p, R) in enumerate(views):
+        tracker.step([_partial(centre, RADIUS, p, R, rng)], _partial(centre, RADIUS, p, R, rng).model, i)
+    return tracker
+
+
+def test_a_weak_sighting_is_the_circle_s_bearing_and_apparent_radius_with_the_calibrated_noise():
+    p, R = _views(1)[0]
+    t = R.T @ (FRUIT - p)
+    r_px = F * math.tan(math.asin(RADIUS / np.linalg.norm(t)))
+    s = unmeasured_sighting(t / np.linalg.norm(t), r_px, F, p, R)
+    assert s is not None
+    x = np.r_[FRUIT, RADIUS]
+    np.testing.assert_allclose(s.model.predict(x), s.z, atol=1e-12)
+    sigmas = np.sqrt(np.diag(s.model.noise_cov))
+    np.testing.assert_allclose(sigmas[:2], CENTRE_SIGMA_REL * r_px / F)
+    np.testing.assert_allclose(sigmas[2], RADIUS_SIGMA_REL * math.atan(r_px / F))
+
+
+@pytest.mark.parametrize(
+    "ray, radius_px",
+    [([-1.0, 0.0, 0.0], 30.0), ([0.0, 1.0, 0.0], 30.0), ([1.0, 0.0, 0.0], 0.0), ([1.0, 0.0, 0.0], -3.0),
+     ([1.0, 0.0, 0.0], math.nan), ([math.nan, 0.0, 0.0], 30.0)],
+)  # fmt: skip
+def test_a_circle_that_is_no_fruit_ahead_of_the_camera_gives_no_sighting(ray, radius_px):
+    p, R = _views(1)[0]
+    assert unmeasured_sighting(np.array(ray), radius_px, F, p, R) is None
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_fruit_seen_in_part_from_several_views_is_confirmed_where_it_is(seed):
+    rng = np.random.default_rng(seed)
+    tracker = _seen_in_part(_views(5), rng)
+    (h,) = tracker.confirmed
+    err = float(np.linalg.norm(h.centre_m - FRUIT))
+    assert err < 3.0 * h.belief.sigma_max_m and err < RADIUS, (err, h.belief.sigma_max_m)
+    # no measured track: it is a fruit the episode missed
+    assert unexplained(tracker.tracks, [], FRUIT, 0.2) == [h]
+    assert unexplained(tracker.tracks, [], FRUIT + [0.0, 0.3, 0.0], 0.2) == []  # outside the zone
+    # a neighbour touching it explains nothing; a track on the fruit itself does
+    neighbour = Track(0, Belief(np.r_[FRUIT + [0.0, 2 * RADIUS, 0.0], RADIUS], np.eye(4) * 1e-7), 0, 0)
+    assert unexplained(tracker.tracks, [neighbour], FRUIT, 0.2) == [h]
+    on_it = Track(1, Belief(np.r_[FRUIT + [0.0, 0.0, 0.002], RADIUS], np.eye(4) * 1e-7), 0, 0)
+    assert unexplained(tracker.tracks, [neighbour, on_it], FRUIT, 0.2) == []
+
+
+def test_a_partial_outline_seen_once_is_never_confirmed():
+    rng = np.random.default_rng(3)
+    views = _views(5)
+    tracker = Tracker(CFG, FRUIT, PRIOR, filter_update("ekf", 10), lambda c, r, m: np.ones(len(c), bool))
+    for i, (p, R) in enumerate(views):
+        seen = [_partial(FRUIT + [0.0, 0.04, 0.0], RADIUS, p, R, rng)] if i == 1 else []
+        tracker.step(seen, _partial(FRUIT, RADIUS, p, R, rng).model, i)
+    assert tracker.tracks and not tracker.confirmed
+    assert unexplained(tracker.tracks, [], FRUIT, 0.2) == []
