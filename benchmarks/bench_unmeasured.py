@@ -88,8 +88,9 @@ def main() -> None:
         print(f"{sc.name}: {len(rec.radius_err)} partial refusals on a true fruit so far", flush=True)
     c = np.array(rec.centre_err).reshape(-1, 2)
     r = np.array(rec.radius_err)
-    print(f"centre error / true apparent radius: rms (u, v) {np.sqrt(np.mean(c**2, axis=0)).round(3)}, "
-          f"median |.| {np.median(np.abs(c), axis=0).round(3)}; the loop uses {CENTRE_SIGMA_REL}")  # fmt: skip
+    rms_c, med_c = np.sqrt(np.mean(c**2, axis=0)).round(3), np.median(np.abs(c), axis=0).round(3)
+    print(f"centre error / true apparent radius: rms (u, v) {rms_c}, median |.| {med_c}; "
+          f"the loop uses {CENTRE_SIGMA_REL}")  # fmt: skip
     print(f"radius relative error: rms {np.sqrt(np.mean(r**2)):.3f}, percentiles 5/25/50/75/95 "
           f"{np.percentile(r, [5, 25, 50, 75, 95]).round(3)}; the loop uses {RADIUS_SIGMA_REL}")  # fmt: skip
 
