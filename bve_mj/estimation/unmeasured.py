@@ -99,13 +99,10 @@ def explained_in_view(sighting: Sighting, tracks: Sequence[Track]) -> bool:
     centre hides behind a tracked one's middle shows too little to count anyway)."""
     m = sighting.model
     for t in tracks:
-        d = m.R_world_camera.T @ (t.centre_m - m.p_world_camera)
-        rho = float(np.linalg.norm(d))
-        if d[0] <= 1e-3 * rho or not 0.0 < t.radius_m < rho:
-            continue
-        alpha = math.asin(t.radius_m / rho)
-        offset = math.hypot(sighting.z[0] - d[1] / d[0], sighting.z[1] - d[2] / d[0])
-        if offset < IN_VIEW_SHARE * math.tan(alpha):
+        if not 0.0 < t.radius_m < float(np.linalg.norm(t.centre_m - m.p_world_camera)):
+            continue  # no apparent size: a radius not > 0, or the camera inside the fruit
+        u, v, alpha = m.predict(t.belief.mean)  # a fruit behind the camera lands far off
+        if math.hypot(sighting.z[0] - u, sighting.z[1] - v) < IN_VIEW_SHARE * math.tan(alpha):
             return True
     return False
 
