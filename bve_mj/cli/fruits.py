@@ -77,6 +77,8 @@ def run_every_fruit_cli(
         f"{len(doc['unmatched_tracks'])} false tracks, {len(doc['other_tracks'])} on less ripe fruit; "
         f"{len(doc['views'])} views; wall {doc['wall_s']:.2f} s"
     )
+    if doc["zone_framed"] is not None:
+        print(f"work zone framed by the views: {100 * doc['zone_framed']:.0f}%")
     for h in doc["seen_in_part"]:
         at = ", ".join(f"{x:.3f}" for x in h["estimate_m"])
         print(

@@ -91,6 +91,16 @@ class TrackingConfig:
             "deg",
         ),
     )
+    zone_framed_share: float = field(
+        default=1.0,
+        metadata=_why(
+            "before the episode says it found every fruit, its images must have framed this share "
+            "of the work zone (a grid of points a quarter of zone_m apart, each at least half a "
+            "fruit's apparent radius inside the image): a fruit outside every image was never "
+            "seen. Until then, once every track is localised, the BVE looks at the largest part "
+            "not framed yet; 0 = no such check",
+        ),
+    )
     candidates: int = field(
         default=2,
         metadata=_why(
@@ -108,6 +118,8 @@ class TrackingConfig:
         _positive_int("tracking", "confirm_hits", self.confirm_hits, 100)
         _positive_int("tracking", "delete_misses", self.delete_misses, 100)
         _positive_int("tracking", "candidates", self.candidates, 32)
+        if not 0.0 <= _number("tracking", "zone_framed_share", self.zone_framed_share) <= 1.0:
+            raise ConfigError("tracking.zone_framed_share", self.zone_framed_share, "a number in [0, 1]")
         if not 0.0 <= _number("tracking", "explore_span_deg", self.explore_span_deg) <= 180.0:
             raise ConfigError("tracking.explore_span_deg", self.explore_span_deg, "a number in [0, 180]")
         if _number("tracking", "zone_m", self.zone_m) > self.max_range_m:

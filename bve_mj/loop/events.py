@@ -18,6 +18,7 @@ EventKind = Literal[
     "outlier",  # injected: the measurement got a gross error
     "ik_failure",  # injected: the move's IK failed
     "seen_in_part_reset",  # --fruits all: weak evidence of fruit seen in part broke a belief: restarted
+    "zone_unframed",  # --fruits all: a view aimed at a part of the zone not yet framed framed none of it
 ]
 
 

@@ -37,6 +37,7 @@ from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.planning.every_fruit import EXPLORE, FruitTarget, PlansForEveryFruit
 from bve_mj.planning.plan import PlanStatus, ViewPlan
+from bve_mj.planning.zone_coverage import ZoneCoverage
 from bve_mj.sim.world import ReportsUnmeasured, SeesEveryFruit
 
 __all__ = [
@@ -91,6 +92,9 @@ class FruitsView:
     unmeasured: tuple[FruitState, ...] = ()
     """The fruit seen in part from enough views and explained by no track after this view
     (:func:`~bve_mj.estimation.unmeasured.unexplained`; never localised)."""
+    zone_framed: float = math.nan
+    """The share of the work zone framed by this view or an earlier one
+    (:class:`~bve_mj.planning.zone_coverage.ZoneCoverage`; nan when the loop has none)."""
 
 
 @dataclass(frozen=True)
@@ -141,6 +145,7 @@ def run_every_fruit(
     on_view: Callable[[FruitsView], None] | None = None,
     zone: Belief | None = None,
     seen_in_part: Tracker | None = None,
+    coverage: ZoneCoverage | None = None,
 ) -> FruitsResult:
     """Observe from the start pose, then up to ``steps`` times: plan for every fruit, move,
     observe, track; stop when every track is localised and the views span
@@ -152,6 +157,11 @@ def run_every_fruit(
     that :class:`~bve_mj.sim.world.ReportsUnmeasured`): one confirmed there and explained by
     no track keeps the episode from saying it found every fruit (``incomplete``).
 
+    ``coverage``: the work zone's grid. The episode says it found every fruit only once its
+    views have framed ``tracking.zone_framed_share`` of it; until then its exploring views
+    look at the largest part not framed yet (:meth:`~bve_mj.planning.zone_coverage.
+    ZoneCoverage.aim_m`), before they look for new directions.
+
     A planner that fails holds the camera where it is (event ``planner_failed``)."""
     t0 = time.perf_counter()
     views: list[FruitsView] = []
@@ -160,7 +170,13 @@ def run_every_fruit(
 
     tried: dict[int, int] = {}  # views planned for each fruit seen in part
 
-    def look(i: int, plan: ViewPlan | None, target: int | None, events: list[Event]) -> None:
+    def look(
+        i: int,
+        plan: ViewPlan | None,
+        target: int | None,
+        events: list[Event],
+        framing: np.ndarray | None = None,
+    ) -> None:
         sightings, camera = world.observe_all()
         t1 = time.perf_counter()
         step = tracker.step(sightings, camera, i, target)
@@ -183,6 +199,12 @@ def run_every_fruit(
             (here - tracker.zone_centre_m) / max(float(np.linalg.norm(here - tracker.zone_centre_m)), 1e-9)
         )
         planner.note_explored(here, tracker.zone_centre_m)
+        if coverage is not None:
+            before = coverage.share
+            coverage.note(camera.p_world_camera, camera.R_world_camera)
+            if framing is not None and not coverage.share > before:  # the arm cannot frame it
+                coverage.give_up(framing)
+                events.append(Event("zone_unframed", f"near {np.round(framing, 3).tolist()}"))
         q = world.q_measured
         if q is not None:
             planner.set_configuration(q)
@@ -192,6 +214,7 @@ def run_every_fruit(
                 i, world.p_world_camera, target, None if plan is None else plan.status,
                 True if plan is None else plan.feasible, 0.0 if plan is None else plan.plan_s,
                 track_s, len(sightings), step, states, info, tuple(events), unmeasured,
+                math.nan if coverage is None else coverage.share,
             )
         )  # fmt: skip
         if on_view is not None:
@@ -211,7 +234,11 @@ def run_every_fruit(
             and all(s.localised for s in states)
             and explored_deg(seen_from) >= span
             and not pending()
+            and framed()
         )
+
+    def framed() -> bool:
+        return coverage is None or coverage.share >= tracker.config.zone_framed_share
 
     for i in range(1, steps + 1):
         if done():
@@ -231,8 +258,17 @@ def run_every_fruit(
             targets += [
                 FruitTarget(seen_in_part_key(h.id), h.belief, False, h.belief.sigma_max_m) for h in parts
             ]
+        framing: np.ndarray | None = None  # where a view that looks for the unframed zone aims
         if all(s.localised for s in states) and not parts:  # look for fruit not yet seen
-            plan, target = _explore(planner, zone, tracker, world, i, events), EXPLORE
+            aim = zone
+            if zone is not None and coverage is not None and not framed():
+                if coverage.can_aim:
+                    framing = coverage.aim_m()
+                    aim = Belief(np.r_[framing, zone.mean[3:]], zone.cov)
+                elif states and explored_deg(seen_from) >= span and not pending():
+                    outcome = Outcome.INCOMPLETE  # every fruit found is localised; the rest of
+                    break  # the zone cannot be framed: no view left that could find one there
+            plan, target = _explore(planner, aim, tracker, world, i, events), EXPLORE
         else:
             t_plan = time.perf_counter()
             try:
@@ -249,7 +285,7 @@ def run_every_fruit(
             h_id = seen_in_part_id(target)
             tried[h_id] = tried.get(h_id, 0) + 1
         world.move_camera(plan)
-        look(i, plan, target, events)
+        look(i, plan, target, events, framing)
     else:
         if done():
             outcome = Outcome.CONVERGED

@@ -41,6 +41,7 @@ from bve_mj.planning.every_fruit import (
     PlansForEveryFruit,
     information_gain,
 )
+from bve_mj.planning.zone_coverage import ZoneCoverage
 from bve_mj.robot import make_arm_planner
 from bve_mj.sim.mujoco_world import MujocoWorld
 from bve_mj.sim.scene_model import RIPENESS, Fruit, SceneInfo
@@ -151,8 +152,9 @@ class FruitsEpisode:
         what the tracker did, and ``fruits``: per true ripe fruit its truth, radius and the
         matched track's estimate, radius, error, NEES and whether it is localised;
         ``unmatched_tracks`` (false positives), ``other_tracks`` (on fruit less ripe or
-        outside the zone) and ``seen_in_part`` (fruit seen only in part from several views,
-        never measured, explained by no track: where the episode knows it missed one)."""
+        outside the zone), ``seen_in_part`` (fruit seen only in part from several views,
+        never measured, explained by no track: where the episode knows it missed one) and
+        ``zone_framed`` (the share of the work zone some view framed; None without the check)."""
         matches, other, false = self.matches()
         views = []
         for v in self.result.views:
@@ -173,6 +175,7 @@ class FruitsEpisode:
                     "events": [f"{e.kind}:{e.track}" for e in v.tracking.events] + [str(e) for e in v.events],
                     "tracks": [_track_json(t) for t in v.fruits],
                     "timings_s": (v.world or {}).get("timings_s"),
+                    "zone_framed": None if math.isnan(v.zone_framed) else v.zone_framed,
                 }
             )
         fruits = []
@@ -202,6 +205,7 @@ class FruitsEpisode:
             "unmatched_tracks": [_track_json(t) for t in false],
             "other_tracks": [_track_json(t) for t in other],
             "seen_in_part": [_track_json(t) for t in self.result.unmeasured],
+            "zone_framed": views[-1]["zone_framed"] if views else None,
             "harvest": None if self.harvest is None else self.harvest.to_json(),
             "outcome": self.result.outcome,
             "wall_s": self.result.wall_s,
@@ -321,11 +325,16 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr)
     seen_in_part = Tracker(s.tracking, zone, radius_prior, update, visible)
     claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF)
+    coverage = None
+    if s.tracking.zone_framed_share > 0.0:
+        coverage = ZoneCoverage(
+            zone, s.tracking.zone_m, fruit.radius_m, f, cam.width_px, cam.height_px, s.tracking.max_range_m
+        )
     try:
         result = run_every_fruit(
             world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims,
             on_view=None if recorder is None else recorder.on_view, zone=zone_belief,
-            seen_in_part=seen_in_part,
+            seen_in_part=seen_in_part, coverage=coverage,
         )  # fmt: skip
         visits = None
         if s.episode.approach and result.final:

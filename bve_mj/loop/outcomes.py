@@ -72,8 +72,9 @@ _NOTES = {
     "gated out supporting another answer as well): do not trust it",
     Outcome.INCOMPLETE: "every fruit tracked is localised, but the zone holds a fruit that is not: "
     "something seen once (a fruit the detector refused from every later view, or a false "
-    "detection) was never seen again, or a fruit was seen only in part, from several views, and "
-    "never measured (seen_in_part in the JSON)",
+    "detection) was never seen again, a fruit was seen only in part, from several views, and "
+    "never measured (seen_in_part in the JSON), or part of the zone was never in an image: the arm "
+    "could not frame it (zone_framed in the JSON: the share that was)",
     Outcome.STALLED: "the camera stopped moving (no better reachable view): more views would only "
     "repeat the same measurement",
 }

@@ -20,6 +20,7 @@ visited (rendered without the sensor's noise) with the localised tracks' discs d
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -292,6 +293,8 @@ class FruitsRecorder(OutsideVideo):
             why = "the start pose"
         elif view.planned_for == EXPLORE:
             why = "planned to explore the work zone"
+            if not math.isnan(view.zone_framed):
+                why += f" ({100 * view.zone_framed:.0f}% framed so far)"
         elif view.planned_for < EXPLORE:
             why = f"planned for fruit #{seen_in_part_id(view.planned_for)} seen in part"
         else:

@@ -1,0 +1,199 @@
+"""The work zone framed by the views (:mod:`bve_mj.planning.zone_coverage`), and the every-fruit
+loop that will not say it found every fruit of a zone it has not framed."""
+
+import math
+
+import numpy as np
+import pytest
+
+from bve_mj.config import TrackingConfig
+from bve_mj.estimation import BearingSizeModel, Belief, filter_update
+from bve_mj.estimation.assignment import Sighting
+from bve_mj.estimation.tracks import Tracker
+from bve_mj.estimation.visibility import visible_arc_deg
+from bve_mj.geometry import camera_rotation
+from bve_mj.loop.every_fruit import run_every_fruit
+from bve_mj.loop.outcomes import Outcome
+from bve_mj.planning.every_fruit import EXPLORE
+from bve_mj.planning.plan import ViewPlan
+from bve_mj.planning.zone_coverage import GRID_STEPS, ZoneCoverage, zone_grid
+
+F, W, H = 466.0, 640, 480
+CENTRE = np.array([0.5, 0.0, 0.3])
+RADIUS = 0.03
+PRIOR = (0.03, 0.03 * 0.15 / math.sqrt(3.0))
+
+
+def _coverage(zone_m=0.15):
+    return ZoneCoverage(CENTRE, zone_m, RADIUS, F, W, H, 0.8)
+
+
+def test_the_zone_grid_fills_the_ball_a_quarter_radius_apart():
+    pts = zone_grid(CENTRE, 0.2)
+    d = np.linalg.norm(pts - CENTRE, axis=1)
+    assert len(pts) == 257 and GRID_STEPS == 4
+    assert d.max() <= 0.2 + 1e-12 and d.min() == 0.0
+    step = np.diff(np.unique(np.round(pts[:, 0], 9)))
+    assert np.allclose(step, 0.05)
+    with pytest.raises(ValueError, match="radius"):
+        zone_grid(CENTRE, 0.0)
+
+
+def test_a_point_is_framed_in_front_inside_the_border_and_within_range():
+    cov = _coverage()
+    p = CENTRE - np.array([0.3, 0.0, 0.0])
+    R = camera_rotation(p, CENTRE)
+    framed = cov.in_image(p, R)
+    assert framed[np.argmin(np.linalg.norm(cov.points_m - CENTRE, axis=1))]
+    # at 0.3 m the image reaches tan(hfov/2)·0.3 = 0.206 m to the side, less half a fruit's
+    # apparent radius: y = 0.15 (at depth 0.3 - 0) is inside, a point 0.25 m aside is not
+    t = (cov.points_m - p) @ R
+    u = 0.5 * W - F * t[:, 1] / t[:, 0]
+    v = 0.5 * H - F * t[:, 2] / t[:, 0]
+    margin = 0.5 * F * RADIUS / t[:, 0]
+    inside = (u >= margin) & (u <= W - margin) & (v >= margin) & (v <= H - margin)
+    assert np.array_equal(framed, inside)
+    assert 0 < framed.sum() < len(framed)
+    # behind the camera, or beyond the range: never
+    back = camera_rotation(p, 2 * p - CENTRE)
+    assert not cov.in_image(p, back).any()
+    far = ZoneCoverage(CENTRE, 0.15, RADIUS, F, W, H, 0.14)  # the nearest point is 0.15 m off
+    assert not far.in_image(p, R).any()
+
+
+def test_views_add_up_and_the_aim_is_the_middle_of_the_largest_part_not_framed():
+    cov = _coverage()
+    left = CENTRE + np.array([-0.3, 0.12, 0.0])
+    cov.note(left, camera_rotation(left, CENTRE + np.array([0.0, 0.12, 0.0])))
+    share = cov.share
+    assert 0.0 < share < 1.0 and not cov.complete
+    aim = cov.aim_m()
+    assert not cov.framed[np.argmin(np.linalg.norm(cov.points_m - aim, axis=1))]
+    assert aim[1] < 0.0  # the framed part is on the left (+y): the aim lies right
+    right = CENTRE + np.array([-0.3, -0.12, 0.0])
+    cov.note(right, camera_rotation(right, CENTRE + np.array([0.0, -0.12, 0.0])))
+    assert cov.share > share
+    # a part given up is not aimed at again, and stays unframed
+    while cov.can_aim:
+        cov.give_up(cov.aim_m())
+    assert not cov.complete and np.allclose(cov.aim_m(), CENTRE)
+
+
+class _World:
+    """Fruit as spheres; a camera that goes where it is told (``reach``: or stays, beyond it)
+    and measures every fruit whose outline shows 150° or more, with small noise."""
+
+    def __init__(self, fruit, reach=None):
+        self.fruit = [np.asarray(f, dtype=float) for f in fruit]
+        self.p = CENTRE - np.array([0.25, 0.0, 0.0])
+        self.target = CENTRE.copy()
+        self.reach = reach
+        self.q_measured = None
+
+    @property
+    def p_world_camera(self):
+        return self.p
+
+    def move_camera(self, plan):
+        if self.reach is None or self.reach(plan.p_world_camera):
+            self.p, self.target = plan.p_world_camera.copy(), plan.p_world_target.copy()
+
+    def observe_all(self):
+        R = camera_rotation(self.p, self.target)
+        centres = np.array(self.fruit)
+        seen = visible_arc_deg(centres, np.full(len(centres), RADIUS), self.p, R, F, W, H) >= 150.0
+        cov = np.eye(3) * (0.3 / F) ** 2
+        model = BearingSizeModel(self.p, R, cov)
+        out = [Sighting(model.predict(np.r_[c, RADIUS]), model) for c in centres[seen]]
+        return out, model
+
+    def view_info(self):
+        return {}
+
+
+class _Planner:
+    """Views 0.25 m from whatever it is asked to look at, from directions that turn by 25°
+    a view (so a fruit is seen from several directions, and the views span the zone)."""
+
+    def __init__(self):
+        self.k = 0
+
+    def _at(self, aim):
+        self.k += 1
+        a = math.radians(25.0 * ((self.k % 5) - 2))
+        d = np.array([-math.cos(a), math.sin(a), 0.0])
+        return ViewPlan(aim + 0.25 * d, aim.copy(), "optimal", True, 0.0)
+
+    def plan(self, fruits, p_world_camera, iteration, q=None):
+        worst = max((f for f in fruits if not f.localised), key=lambda f: f.sigma_max_m)
+        return self._at(worst.belief.centre_m), worst.id
+
+    def explore(self, zone, p_world_camera, iteration, q=None):
+        return self._at(zone.centre_m)
+
+    def forget(self, fruit):
+        pass
+
+    def set_configuration(self, q):
+        pass
+
+    def note_failed_view(self, fruit, p_world_camera, p_world_target):
+        pass
+
+    def note_fused_view(self, fruit, p_world_camera, p_world_target):
+        pass
+
+    def note_explored(self, p_world_camera, p_world_target):
+        pass
+
+
+def _episode(world, coverage, zone_m=0.3):
+    cfg = TrackingConfig(fruits="all", zone_m=zone_m)
+
+    def visible(c, r, m):
+        return visible_arc_deg(c, r, m.p_world_camera, m.R_world_camera, F, W, H) >= 150.0
+
+    tracker = Tracker(cfg, CENTRE, PRIOR, filter_update("ekf", 10), visible)
+    sd = zone_m / 2.0
+    zone = Belief(np.r_[CENTRE, PRIOR[0]], np.diag([sd**2] * 3 + [PRIOR[1] ** 2]))
+    return run_every_fruit(world, _Planner(), tracker, 40, 0.002, 3, zone=zone, coverage=coverage)
+
+
+def test_a_fruit_the_views_of_its_neighbour_never_frame_is_found_once_the_zone_must_be_framed():
+    """Two fruit 0.22 m apart vertically in a zone of 0.3 m: views 0.25 m from the first frame
+    ±0.13 m vertically and never show the second. Without the zone check the episode says it
+    found every fruit with one; with it, it looks at the part not framed, finds the second and
+    localises both before saying so."""
+    above = CENTRE + np.array([0.0, 0.0, 0.22])
+    blind = _episode(_World([CENTRE, above]), None)
+    assert blind.outcome == Outcome.CONVERGED and len(blind.final) == 1
+
+    cov = ZoneCoverage(CENTRE, 0.3, RADIUS, F, W, H, 0.8)
+    res = _episode(_World([CENTRE, above]), cov)
+    assert res.outcome == Outcome.CONVERGED
+    assert len(res.final) == 2 and all(s.localised for s in res.final)
+    for truth in (CENTRE, above):
+        assert min(np.linalg.norm(s.belief.centre_m - truth) for s in res.final) < 1e-3
+    assert res.views[-1].zone_framed == 1.0
+    assert any(v.planned_for == EXPLORE for v in res.views)
+    assert all(math.isnan(v.zone_framed) for v in blind.views)
+
+
+def test_a_zone_the_arm_cannot_frame_ends_incomplete_not_converged():
+    """The camera cannot go above z = 0.35 m: the top of the zone is never framed. Each view
+    aimed there that frames nothing new gives that part up (event ``zone_unframed``); with
+    nothing left to aim at the episode ends ``incomplete``, early, not ``converged``."""
+    cov = ZoneCoverage(CENTRE, 0.3, RADIUS, F, W, H, 0.8)
+    res = _episode(_World([CENTRE], reach=lambda p: p[2] <= 0.35), cov)
+    assert res.outcome == Outcome.INCOMPLETE
+    assert res.views[-1].zone_framed < 1.0 and len(res.views) < 41
+    assert any(e.kind == "zone_unframed" for v in res.views for e in v.events)
+    assert all(s.localised for s in res.final)
+
+
+def test_the_zone_share_setting_is_validated():
+    with pytest.raises(Exception, match=r"tracking\.zone_framed_share"):
+        TrackingConfig(zone_framed_share=1.5)
+    with pytest.raises(Exception, match=r"tracking\.zone_framed_share"):
+        TrackingConfig(zone_framed_share=float("nan"))
+    assert TrackingConfig(zone_framed_share=0.0).zone_framed_share == 0.0
