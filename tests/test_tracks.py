@@ -233,6 +233,26 @@ def test_two_sightings_of_one_fruit_from_far_apart_views_make_one_track():
     assert np.allclose(np.sqrt(np.diag(t.belief.cov)), np.sqrt(np.diag(direct.cov)), rtol=0.1)
 
 
+def test_two_things_in_one_image_never_merge_by_agreement_nor_confirm_each_other():
+    """Two sightings of one view (two fragments of a fruit, or two fruit side by side): their
+    rays leave one camera and agree near it, crossing nowhere. Seen again from the same pose,
+    they stay two tentative tracks of two views each (merged by agreement, they became one
+    track of three detections from two views, confirmed when hits counted detections)."""
+    centre = np.array([0.45, 0.0, 0.3])
+    cfg = TrackingConfig(fruits="all", zone_m=0.2, gate_probability=1e-6, confirm_hits=3)  # gate shut
+    tracker = Tracker(cfg, centre, (0.03, 0.003), UPDATE, _visible())
+    p, R = _views(5)[2]
+    wide = lambda: BearingSizeModel(p, R, np.diag([(8.0 / F) ** 2] * 2 + [0.2**2]))  # noqa: E731
+    a, b = centre + np.array([0.0, 0.035, 0.0]), centre - np.array([0.0, 0.035, 0.0])  # two touching fruit
+    for view in range(2):
+        step = tracker.step(
+            [Sighting(_z(a, 0.03, p, R), wide()), Sighting(_z(b, 0.03, p, R), wide())], wide(), view
+        )
+        assert not [e for e in step.events if e.kind == "merged"]
+    assert len(tracker.tracks) == 2 and not any(t.confirmed for t in tracker.tracks)
+    assert all(t.views == {0, 1} and t.hits == 2 for t in tracker.tracks)
+
+
 def test_without_its_gate_a_detection_would_be_given_to_the_wrong_fruit():
     """Break the gate on purpose: with every pair allowed, a lone detection of a new fruit is
     assigned to a far track instead of starting its own (the test above relies on the gate)."""

@@ -13,6 +13,7 @@ from bve_mj.estimation.tracks import Track, Tracker
 from bve_mj.estimation.unmeasured import (
     CENTRE_SIGMA_REL,
     RADIUS_SIGMA_REL,
+    too_small,
     unexplained,
     unmeasured_sighting,
 )
@@ -79,6 +80,25 @@ def test_a_weak_sighting_is_the_circle_s_bearing_and_apparent_radius_with_the_ca
 def test_a_circle_that_is_no_fruit_ahead_of_the_camera_gives_no_sighting(ray, radius_px):
     p, R = _views(1)[0]
     assert unmeasured_sighting(np.array(ray), radius_px, F, p, R) is None
+
+
+def test_a_circle_smaller_than_any_fruit_of_the_zone_could_look_is_a_fragment():
+    """The smallest fruit the prior allows, at the zone's far edge, sets the floor: a fruit's
+    own circle passes wherever in the zone it lies; a circle a third of its size (a stem's or
+    a sepal's curve) does not."""
+    p, R = _views(1)[0]
+    zone_m, r_min = 0.2, 0.8 * RADIUS
+    far = FRUIT + zone_m * (FRUIT - p) / np.linalg.norm(FRUIT - p)  # the zone's far edge
+
+    def circle(centre, radius_m, share):
+        t = R.T @ (centre - p)
+        r_px = F * math.tan(math.asin(radius_m / np.linalg.norm(t)))
+        return unmeasured_sighting(t / np.linalg.norm(t), share * r_px, F, p, R)
+
+    assert not too_small(circle(FRUIT, RADIUS, 1.0), FRUIT, zone_m, r_min)
+    assert not too_small(circle(far, r_min, 1.001), FRUIT, zone_m, r_min)
+    assert too_small(circle(far, r_min, 0.99), FRUIT, zone_m, r_min)
+    assert too_small(circle(FRUIT, RADIUS, 1.0 / 3.0), FRUIT, zone_m, r_min)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

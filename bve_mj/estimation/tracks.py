@@ -17,7 +17,8 @@ centre and radius), and per view:
    prior the range, so the belief is wide along the ray (:func:`belief_from_detection`);
 4. **counts a miss** for each track predicted visible (in the image, its outline not hidden
    by another track's: :mod:`bve_mj.estimation.visibility`) that got no detection; a track
-   is confirmed after ``confirm_hits`` detections, and deleted when, never confirmed, the
+   is confirmed once its detections come from ``confirm_hits`` views (two detections of one
+   view, merged, are one view's evidence), and deleted when, never confirmed, the
    views planned to see it missed it ``delete_misses`` times, or any views did three times
    that often (a false detection is not seen again; a real fruit the detector refuses from
    a poor view is, from a good one);
@@ -26,7 +27,9 @@ centre and radius), and per view:
    counted twice; they are merged when they agree (χ² of the difference of their states,
    ``merge_probability``) and, for two confirmed tracks, their centres lie closer than a
    fruit's radius. Two tentative tracks of one fruit are two rays that cross at it (each
-   long along its ray), so for them agreement alone decides. Two tracks whose centres lie
+   long along its ray), so for them agreement alone decides; two with a view in common are two
+   things in one image, whose rays from one camera agree near it and cross nowhere: they
+   never merge by agreement. Two tracks whose centres lie
    closer than a fruit's radius are one fruit whatever their beliefs say (two fruit cannot
    overlap): when they disagree, the one with more detections stays as it is.
 
@@ -65,11 +68,13 @@ class Track:
         misses: views that should have seen it (predicted visible) and did not.
         failed: views planned to see it (its turn in the planner) that did not.
         expected: views in which it was predicted visible.
-        confirmed: ``hits`` reached the confirmation count once.
+        confirmed: its detections came from the confirmation count of views, once (two
+            tracks started in one view and merged are one view's evidence, not two).
         first_view, last_view: the views that started it and last saw it.
         innovations: (NIS, dimension) of its assigned detections after the first.
         directions: unit directions fruit → camera of the views fused, for the correlation of
             views from nearby directions (the first's included).
+        views: the views whose detections it holds.
     """
 
     id: int
@@ -83,6 +88,7 @@ class Track:
     confirmed: bool = False
     innovations: list[tuple[float, int]] = field(default_factory=list)
     directions: list[np.ndarray] = field(default_factory=list)
+    views: set[int] = field(default_factory=set)
 
     @property
     def centre_m(self) -> np.ndarray:
@@ -262,11 +268,12 @@ class Tracker:
         result = self._update(t.belief, s.z, model, None)
         t.belief = result.belief
         t.hits += 1
+        t.views.add(view)
         t.last_view = view
         t.innovations.append((result.nis, 3))
         t.directions.append(direction)
         events.append(TrackEvent("updated", t.id))
-        if not t.confirmed and t.hits >= self.config.confirm_hits:
+        if not t.confirmed and len(t.views) >= self.config.confirm_hits:
             t.confirmed = True
             events.append(TrackEvent("confirmed", t.id))
 
@@ -286,7 +293,7 @@ class Tracker:
         along = float(np.clip((self.zone_centre_m - p) @ ray / rng, rng - sd, rng + sd))
         if rng > cfg.max_range_m or np.linalg.norm(p + along * ray / rng - self.zone_centre_m) > cfg.zone_m:
             return None
-        t = Track(self._next_id, belief, view, view, confirmed=cfg.confirm_hits <= 1)
+        t = Track(self._next_id, belief, view, view, confirmed=cfg.confirm_hits <= 1, views={view})
         t.directions.append(unit(s.model.p_world_camera - belief.centre_m))
         self._next_id += 1
         self.tracks.append(t)
@@ -307,12 +314,17 @@ class Tracker:
                     continue  # two fruit: their fused belief is not needed
                 fused = self._fused(a.belief, b.belief)
                 both = a.confirmed and b.confirmed
-                agree = fused is not None and chi2 <= limit
+                # two rays from one camera agree near it without crossing at a fruit: tracks
+                # with a view in common (two things in one image) never merge by agreement
+                agree = fused is not None and chi2 <= limit and not (a.views & b.views)
                 if (agree and (close or not both)) or close:
                     keep, drop = (a, b) if (a.hits, -a.id) >= (b.hits, -b.id) else (b, a)
                     keep.belief = fused if fused is not None and agree else keep.belief
                     keep.hits += drop.hits
-                    keep.confirmed = keep.confirmed or drop.confirmed or keep.hits >= self.config.confirm_hits
+                    keep.views |= drop.views
+                    keep.confirmed = (
+                        keep.confirmed or drop.confirmed or len(keep.views) >= self.config.confirm_hits
+                    )
                     keep.innovations += drop.innovations
                     keep.directions += drop.directions
                     keep.last_view = max(keep.last_view, drop.last_view)
@@ -340,7 +352,9 @@ class Tracker:
     def snapshot(self) -> tuple[Track, ...]:
         """Copies of the tracks (for records: later views do not change them)."""
         return tuple(
-            dataclasses.replace(t, innovations=list(t.innovations), directions=list(t.directions))
+            dataclasses.replace(
+                t, innovations=list(t.innovations), directions=list(t.directions), views=set(t.views)
+            )
             for t in self.tracks
         )
 

@@ -34,6 +34,7 @@ __all__ = [
     "NO_NEIGHBOUR_SHARE",
     "RADIUS_SIGMA_REL",
     "explained_in_view",
+    "too_small",
     "unexplained",
     "unmeasured_sighting",
 ]
@@ -90,6 +91,19 @@ def unmeasured_sighting(
     cov = np.diag([s_c**2, s_c**2, s_a**2])
     z = np.array([b[1] / b[0], b[2] / b[0], alpha])
     return Sighting(z, BearingSizeModel(p_world_camera, R_world_camera, cov))
+
+
+def too_small(sighting: Sighting, zone_centre_m: np.ndarray, zone_m: float, radius_min_m: float) -> bool:
+    """Whether a weak sighting's circle is smaller than any fruit of the work zone looks from its
+    camera: the smallest fruit the prior allows (``radius_min_m``), at the zone's far edge (the
+    camera's distance to its centre plus ``zone_m``), would look bigger. Such a circle is a
+    fragment's curve (a stem, a sepal, a short stretch of a neighbour's rim), not a fruit's: the
+    refusals whose circle is under half the true fruit's apparent radius lie 0.65-0.8 of that
+    radius off (rms; ``python benchmarks/bench_unmeasured.py``), 2-10 times their own radius,
+    where the noise above assumes 0.32 of it."""
+    p = sighting.model.p_world_camera
+    far = float(np.linalg.norm(np.asarray(zone_centre_m, dtype=float) - p)) + zone_m
+    return float(sighting.z[2]) < math.asin(min(max(radius_min_m, 0.0) / far, 1.0))
 
 
 def explained_in_view(sighting: Sighting, tracks: Sequence[Track]) -> bool:

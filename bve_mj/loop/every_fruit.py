@@ -31,7 +31,7 @@ from bve_mj.estimation.assignment import Sighting
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.tracks import Track, Tracker, ViewTracking
-from bve_mj.estimation.unmeasured import explained_in_view, unexplained
+from bve_mj.estimation.unmeasured import explained_in_view, too_small, unexplained
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
@@ -315,11 +315,18 @@ def _seen_in_part(
     tracker: Tracker,
     events: list[Event],
 ) -> tuple[FruitState, ...]:
-    """Track this view's fruit seen in part (those that are not a tracked fruit partly hidden
-    in this view) and return those confirmed in the zone that no track explains. Weak
-    evidence never ends an episode: a belief it breaks (a radius driven through zero)
-    restarts it (event ``seen_in_part_reset``)."""
-    weak = [w for w in weak if not explained_in_view(w, tracker.tracks)]
+    """Track this view's fruit seen in part (those whose circle is no fragment's, and that are
+    not a tracked fruit partly hidden in this view) and return those confirmed in the zone
+    that no track explains. Weak evidence never ends an episode: a belief it breaks (a radius
+    driven through zero) restarts it (event ``seen_in_part_reset``)."""
+    r0, sd = tracker.radius_prior
+    zone_centre, zone_m = tracker.zone_centre_m, tracker.config.zone_m
+    r_min = r0 - math.sqrt(3.0) * sd  # the prior's smallest fruit (uniform ±spread)
+    weak = [
+        w
+        for w in weak
+        if not too_small(w, zone_centre, zone_m, r_min) and not explained_in_view(w, tracker.tracks)
+    ]
     try:
         seen_in_part.step(weak, camera, iteration)
         found = unexplained(seen_in_part.tracks, tracker.tracks, tracker.zone_centre_m, tracker.config.zone_m)
