@@ -79,6 +79,25 @@ def test_views_add_up_and_the_aim_is_the_middle_of_the_largest_part_not_framed()
     assert not cov.complete and np.allclose(cov.aim_m(), CENTRE)
 
 
+def test_seen_from_the_camera_the_aim_is_the_point_whose_view_frames_most_of_the_rest():
+    """With the camera's position and the distance views keep, the aim is the unframed point
+    whose view (from that distance, on the camera's side) frames the most unframed points:
+    checked against every candidate, and it frames more than the middle of the largest patch
+    would."""
+    cov = ZoneCoverage(CENTRE, 0.3, RADIUS, F, W, H, 0.8, standoff_m=0.25)
+    here = CENTRE + np.array([-0.25, 0.05, 0.0])
+    cov.note(here, camera_rotation(here, CENTRE))
+
+    def gain(a):
+        cam = a + 0.25 * (here - a) / np.linalg.norm(here - a)
+        return int(np.count_nonzero(cov.in_image(cam, camera_rotation(cam, a)) & ~cov.framed))
+
+    aim = cov.aim_m(here)
+    rest = cov.points_m[~cov.framed]
+    assert gain(aim) == max(gain(a) for a in rest) > 0
+    assert gain(aim) >= gain(cov.aim_m())  # the largest patch's middle (no camera given)
+
+
 class _World:
     """Fruit as spheres; a camera that goes where it is told (``reach``: or stays, beyond it)
     and measures every fruit whose outline shows 150° or more, with small noise."""

@@ -8,12 +8,14 @@ information it gives the fruit not yet localised. A fruit is localised when its 
 σmax (the filter's, with the claims of :class:`~bve_mj.loop.claims.Claims`: the fruit's own
 offset, its innovations, the share of views that should have seen it and did not) is below
 ``stop_sigma_m`` after at least ``converge_after`` detections. The episode ends
-``converged`` when every track is, ``incomplete`` when every track is but a track was
-dropped on the way (seen once, never again from the views planned for it: a fruit the
-detector could not measure again, or a false detection) or a fruit was seen only in part
-from several views and never measured (behind its neighbours:
-:mod:`bve_mj.estimation.unmeasured`), ``max_views`` when the budget runs out first, and
-``never_detected`` when no view measured a fruit.
+``converged`` when every track is and the views have explored the zone (from directions
+``tracking.explore_span_deg`` apart) and framed all of it (:mod:`bve_mj.planning.
+zone_coverage`); ``incomplete`` when every track is but a track was dropped on the way (seen
+once, never again from the views planned for it: a fruit the detector could not measure
+again, or a false detection), a fruit was seen only in part from several views and never
+measured (behind its neighbours: :mod:`bve_mj.estimation.unmeasured`), or part of the zone
+could not be framed; ``max_views`` when the budget runs out first, and ``never_detected``
+when no view measured a fruit.
 """
 
 from __future__ import annotations
@@ -263,7 +265,7 @@ def run_every_fruit(
             aim = zone
             if zone is not None and coverage is not None and not framed():
                 if coverage.can_aim:
-                    framing = coverage.aim_m()
+                    framing = coverage.aim_m(world.p_world_camera)
                     aim = Belief(np.r_[framing, zone.mean[3:]], zone.cov)
                 elif states and explored_deg(seen_from) >= span and not pending():
                     outcome = Outcome.INCOMPLETE  # every fruit found is localised; the rest of

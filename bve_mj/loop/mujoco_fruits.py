@@ -328,7 +328,14 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     coverage = None
     if s.tracking.zone_framed_share > 0.0:
         coverage = ZoneCoverage(
-            zone, s.tracking.zone_m, fruit.radius_m, f, cam.width_px, cam.height_px, s.tracking.max_range_m
+            zone,
+            s.tracking.zone_m,
+            fruit.radius_m,
+            f,
+            cam.width_px,
+            cam.height_px,
+            s.tracking.max_range_m,
+            search.band_distance_m,
         )
     try:
         result = run_every_fruit(
