@@ -97,8 +97,8 @@ class TrackingConfig:
             "before the episode says it found every fruit, its images must have framed this share "
             "of the work zone (a grid of points a quarter of zone_m apart, each at least half a "
             "fruit's apparent radius inside the image): a fruit outside every image was never "
-            "seen. Until then, once every track is localised, the BVE looks at the largest part "
-            "not framed yet; 0 = no such check",
+            "seen. Until then, once every track is localised, the BVE looks where a view frames "
+            "most of what is not framed yet; 0 = no such check",
         ),
     )
     candidates: int = field(

@@ -161,8 +161,8 @@ def run_every_fruit(
 
     ``coverage``: the work zone's grid. The episode says it found every fruit only once its
     views have framed ``tracking.zone_framed_share`` of it; until then its exploring views
-    look at the largest part not framed yet (:meth:`~bve_mj.planning.zone_coverage.
-    ZoneCoverage.aim_m`), before they look for new directions.
+    aim where a view frames most of what is not framed yet (:meth:`~bve_mj.planning.
+    zone_coverage.ZoneCoverage.aim_m`), before they look for new directions.
 
     A planner that fails holds the camera where it is (event ``planner_failed``)."""
     t0 = time.perf_counter()
@@ -267,7 +267,7 @@ def run_every_fruit(
                 if coverage.can_aim:
                     framing = coverage.aim_m(world.p_world_camera)
                     aim = Belief(np.r_[framing, zone.mean[3:]], zone.cov)
-                elif states and explored_deg(seen_from) >= span and not pending():
+                elif states and explored_deg(seen_from) >= span:
                     outcome = Outcome.INCOMPLETE  # every fruit found is localised; the rest of
                     break  # the zone cannot be framed: no view left that could find one there
             plan, target = _explore(planner, aim, tracker, world, i, events), EXPLORE
@@ -331,7 +331,7 @@ def _seen_in_part(
     ]
     try:
         seen_in_part.step(weak, camera, iteration)
-        found = unexplained(seen_in_part.tracks, tracker.tracks, tracker.zone_centre_m, tracker.config.zone_m)
+        found = unexplained(seen_in_part.tracks, tracker.tracks, zone_centre, zone_m)
     except (EstimationError, np.linalg.LinAlgError) as exc:
         events.append(Event("seen_in_part_reset", f"{type(exc).__name__}: {exc}"))
         seen_in_part.tracks.clear()
