@@ -1,6 +1,7 @@
 """The spheroid silhouette: exact residuals on a spheroid's grazing rays, and a fit that
 finds a flattened fruit's centre where a circle through its equator cannot."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -120,3 +121,79 @@ def test_the_analytic_jacobian_matches_finite_differences_on_the_silhouette():
 
     fd = finite_difference(resid, x, 1e-7)
     np.testing.assert_allclose(grazing_jacobian(p, k, up, rays), fd, atol=1e-6 * np.abs(fd).max())
+
+
+def _outline_beside_a_neighbour(lift_deg: float):
+    """The image outline (px) of a round tomato 0.3 m ahead with the side against a touching
+    neighbour hidden, plus the stretch of the neighbour's rim near the junction (within 0.4 of
+    a radius outside the fruit's): the arcs a truss gives the detector as one fruit. The
+    neighbour lies beside it, ``lift_deg`` above the horizontal; the camera looks level."""
+    from bve_mj.config import CameraConfig, FruitPrior, SceneConfig
+    from bve_mj.perception.detection import Intrinsics
+
+    intr = Intrinsics.from_camera(CameraConfig())
+    fruit = FruitPrior.for_scene(SceneConfig())
+    a, k, up = 0.03, fruit.shape_index, np.array([0.0, 0.0, 1.0])
+    centre = np.array([0.30, 0.01, -0.012])
+    lift = math.radians(lift_deg)
+    beside = centre + 2.0 * a * np.array([0.0, math.cos(lift), math.sin(lift)])
+
+    def uv(c):
+        return np.array([intr.project(x) for x in silhouette_rays(c, a, k, up)])
+
+    c_px = intr.project(centre)
+    r_px = intr.focal_px * math.tan(math.asin(a / np.linalg.norm(centre)))
+    own, theirs = uv(centre), uv(beside)
+    towards = intr.project(beside) - c_px
+    off = np.arctan2(own[:, 1] - c_px[1], own[:, 0] - c_px[0]) - math.atan2(towards[1], towards[0])
+    seen = own[np.abs((off + np.pi) % (2.0 * np.pi) - np.pi) > math.radians(60.0)]
+    d = np.linalg.norm(theirs - c_px, axis=1)
+    points = np.vstack([seen, theirs[(d > r_px) & (d < 1.4 * r_px)]])
+    return points, c_px, r_px, intr, fruit, up
+
+
+def test_a_spheroid_pulled_off_the_circle_by_a_neighbour_s_arc_is_measured_with_the_gap_as_its_sigma():
+    """A neighbour's arc grouped with the fruit pulls the circle fit 7 px off; the spheroid,
+    trimming by its own residuals, lands within a pixel of the truth, farther from the circle
+    than the fruit's shape explains. It is measured (it used to be refused as a stray), and
+    that excess is the centre's σ it claims: here larger than its error. Where the two fits
+    agree, the excess is 0."""
+    from bve_mj.config import DetectorConfig
+    from bve_mj.perception import silhouette
+
+    cfg = DetectorConfig()
+    for lift_deg, pulled in ((20.0, True), (0.0, False)):
+        points, c_px, r_px, intr, fruit, up = _outline_beside_a_neighbour(lift_deg)
+        f = intr.focal_px
+        shape_px = fruit.shape_spread_rel * r_px
+        fit = silhouette._fit_silhouette(points, c_px, intr, cfg)
+        sph = silhouette._refine_spheroid(fit, up, fruit, cfg, f, shape_px)
+        assert sph is not None
+        circle_err = float(np.linalg.norm(fit.centre - c_px))
+        sph_err = float(np.linalg.norm(intr.project(sph.axis) - c_px))
+        gap = silhouette._disagreement_px(sph, fit, f, shape_px)
+        if pulled:
+            assert circle_err > 5.0 and sph_err < 1.0, (circle_err, sph_err)
+            assert silhouette._moved_px(sph, fit, f) > shape_px + 2.0  # beyond the shape's play
+            assert gap > sph_err, (gap, sph_err)
+        else:
+            assert gap == 0.0
+
+
+def test_the_fits_disagreement_adds_to_the_centre_s_sigma_the_filter_is_given():
+    from bve_mj.estimation.noise import load_noise_model, measure
+    from bve_mj.perception import Detection
+
+    ray = np.array([1.0, 0.02, -0.01]) / np.linalg.norm([1.0, 0.02, -0.01])
+    det = Detection(
+        centre_px=np.array([310.0, 245.0]), radius_px=45.0, bearing_camera=ray,
+        angular_radius_rad=math.atan(45.0 / F_PX), range_m=0.3, p_camera=0.3 * ray,
+        cov_camera=np.eye(3) * 1e-6, area_px=6000, boundary_points=200, trimmed_fraction=0.1,
+        arc_deg=300.0, centre_fit_px=0.2, radius_fit_px=0.2,
+    )  # fmt: skip
+    noise = load_noise_model()
+    _, cov = measure(det, noise, 0.875, F_PX)
+    _, cov_gap = measure(dataclasses.replace(det, centre_disagreement_px=3.0), noise, 0.875, F_PX)
+    sc, sc_gap = (math.sqrt(c[0, 0]) * F_PX for c in (cov, cov_gap))
+    assert sc_gap == pytest.approx(math.hypot(sc, 3.0))
+    assert cov_gap[2, 2] == cov[2, 2]  # the apparent radius is as before

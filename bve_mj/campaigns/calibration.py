@@ -127,6 +127,7 @@ def sample_views(name: str, settings: Any, scene_seed: int, views: int) -> list[
                     centre_jackknife_px=det.centre_jackknife_px,
                     radius_jackknife_px=det.radius_jackknife_px,
                     neighbour_share=det.neighbour_share,
+                    centre_disagreement_px=det.centre_disagreement_px,
                     err_u_px=float(f * (a[1] / a[0] - t[1] / t[0])),
                     err_v_px=float(f * (a[2] / a[0] - t[2] / t[0])),
                     err_alpha_px=float(f * (det.angular_radius_rad - alpha_true)),

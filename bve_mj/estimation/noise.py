@@ -362,6 +362,7 @@ def measure(
         det.radius_px, det.arc_deg, det.centre_fit_px, det.radius_fit_px, shape_index,
         getattr(det, "neighbour_share", 0.0),
     )  # fmt: skip
+    sc = math.hypot(sc, getattr(det, "centre_disagreement_px", 0.0))  # the two fits' disagreement
     alpha = det.angular_radius_rad - noise.radius_bias(det.radius_px) / focal_px
     z = np.array([a[1] / a[0], a[2] / a[0], alpha])
     return z, np.diag([(sc / focal_px) ** 2, (sc / focal_px) ** 2, (sr / focal_px) ** 2])

@@ -61,6 +61,9 @@ class Detection:
             of the outline out (0 for a single arc) [px, as f·angle].
         neighbour_share: the share of the fitted circle's rim where ripe colour goes on just
             outside it: a ripe neighbour touching or overlapping the fruit there (0 alone).
+        centre_disagreement_px: how much farther the spheroid's centre lies from the circle
+            fit's than the fruit's shape explains [px] (0 where they agree): the centre is that
+            uncertain, and the filter adds it to the centre's σ.
         measurement_cov: the covariance (3, 3) [rad²] of z = (a_y/a_x, a_z/a_x, α) (bearing
             as normalised image coordinates, apparent angular radius) when the detector states
             its own noise (the box and mask adapters of :mod:`bve_mj.perception.adapters`);
@@ -85,6 +88,7 @@ class Detection:
     centre_jackknife_px: float = 0.0
     radius_jackknife_px: float = 0.0
     neighbour_share: float = 0.0
+    centre_disagreement_px: float = 0.0
     measurement_cov: np.ndarray | None = None
 
 

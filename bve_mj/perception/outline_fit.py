@@ -22,6 +22,7 @@ from bve_mj.perception.instances import FruitOutline, hull_points
 from bve_mj.perception.silhouette import (
     _arc_deg,
     _arc_jackknife,
+    _disagreement_px,
     _fit_sigmas,
     _fit_silhouette,
     _refine_spheroid,
@@ -139,10 +140,12 @@ def measure_outline(
             return NoDetection(
                 "no spheroid with the fruit's axis fits the outline: a fragment or not a fruit"
             )
+    disagreement_px = 0.0
     if sph is not None:
         resid_px = f * sph.resid_rad
         keep = _trim_corners((resid_px < cfg.outlier_px) & (resid_px > -2.0 * cfg.outlier_px), margin=3)
         axis, alpha, centre, slack_px = sph.axis, sph.alpha, intrinsics.project(sph.axis), 0.0
+        disagreement_px = _disagreement_px(sph, fit, f, shape_px)
     else:
         resid_px, keep = fit.resid_px, fit.keep
         axis, alpha, centre, slack_px = fit.axis, fit.alpha, fit.centre, shape_px
@@ -203,7 +206,7 @@ def measure_outline(
     # (uniform ±spread) and the pixel error of the apparent radius, dρ/dα = -ρ / tan α;
     # each with the fit's own uncertainty (a short arc), or the arcs' jackknife spread where
     # that is larger, added in quadrature
-    sigma_lat = rho * math.hypot(measurement.centre_sigma_px / f, max(lat_fit, lat_jk))
+    sigma_lat = rho * math.hypot(measurement.centre_sigma_px / f, max(lat_fit, lat_jk), disagreement_px / f)
     sigma_alpha = math.hypot(measurement.radius_sigma_px / f, max(alpha_fit, alpha_jk))
     sigma_rho = rho * math.hypot(size_spread, sigma_alpha / math.tan(alpha))
     cov = _along_across(axis, sigma_rho, sigma_lat)
@@ -224,4 +227,5 @@ def measure_outline(
         radius_fit_px=f * alpha_fit,
         centre_jackknife_px=f * lat_jk,
         radius_jackknife_px=f * alpha_jk,
+        centre_disagreement_px=disagreement_px,
     )
