@@ -185,7 +185,8 @@ def run_every_fruit(
         track_s = time.perf_counter() - t1
         unmeasured: tuple[FruitState, ...] = ()
         if seen_in_part is not None and isinstance(world, ReportsUnmeasured):
-            unmeasured = _seen_in_part(seen_in_part, world.unmeasured(), camera, i, tracker, events)
+            measured = {tid for _, tid in (*step.assigned, *step.started)}
+            unmeasured = _seen_in_part(seen_in_part, world.unmeasured(), camera, i, tracker, measured, events)
         alive = {t.id for t in tracker.tracks}
         for e in step.events:
             if e.kind in ("deleted", "merged"):
@@ -315,19 +316,25 @@ def _seen_in_part(
     camera: BearingSizeModel,
     iteration: int,
     tracker: Tracker,
+    measured: set[int],
     events: list[Event],
 ) -> tuple[FruitState, ...]:
     """Track this view's fruit seen in part (those whose circle is no fragment's, and that are
     not a tracked fruit partly hidden in this view) and return those confirmed in the zone
-    that no track explains. Weak evidence never ends an episode: a belief it breaks (a radius
-    driven through zero) restarts it (event ``seen_in_part_reset``)."""
+    that no track explains. A track ``measured`` in this view (a detection assigned to it, or
+    started it) is not also seen in part in it: a circle on its image is a fruit behind it
+    (``truss_cluster`` 1745651037: a hidden fruit seen in part on the target's image in four
+    views, each taken for the target, which those views measured, and the episode claimed
+    every fruit). Weak evidence never ends an episode: a belief it breaks (a radius driven
+    through zero) restarts it (event ``seen_in_part_reset``)."""
     r0, sd = tracker.radius_prior
     zone_centre, zone_m = tracker.zone_centre_m, tracker.config.zone_m
     r_min = r0 - math.sqrt(3.0) * sd  # the prior's smallest fruit (uniform ±spread)
+    hidden_in_part = [t for t in tracker.tracks if t.id not in measured]
     weak = [
         w
         for w in weak
-        if not too_small(w, zone_centre, zone_m, r_min) and not explained_in_view(w, tracker.tracks)
+        if not too_small(w, zone_centre, zone_m, r_min) and not explained_in_view(w, hidden_in_part)
     ]
     try:
         seen_in_part.step(weak, camera, iteration)

@@ -26,6 +26,7 @@ from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.estimation import Belief, filter_update
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.tracks import Tracker
+from bve_mj.estimation.unmeasured import tracking_config
 from bve_mj.estimation.view_correlation import new_view_share
 from bve_mj.estimation.visibility import visible_arc_deg
 from bve_mj.loop.claims import Claims
@@ -323,7 +324,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         planner = PatternPlanner(make(), zone_belief)
     update = filter_update(s.filter.kind, s.filter.ekf_iterations)
     tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr)
-    seen_in_part = Tracker(s.tracking, zone, radius_prior, update, visible)
+    seen_in_part = Tracker(tracking_config(s.tracking), zone, radius_prior, update, visible)
     claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF)
     coverage = None
     if s.tracking.zone_framed_share > 0.0:
