@@ -138,7 +138,15 @@ class MaskDetector:
         if isinstance(det, NoDetection):
             return det
         f = intr.focal_px
-        sc = math.hypot(self.measurement.centre_sigma_px, det.centre_fit_px, det.centre_jackknife_px) / f
+        sc = (
+            math.hypot(
+                self.measurement.centre_sigma_px,
+                det.centre_fit_px,
+                det.centre_jackknife_px,
+                det.centre_disagreement_px,
+            )
+            / f
+        )
         sr = math.hypot(self.measurement.radius_sigma_px, det.radius_fit_px, det.radius_jackknife_px) / f
         return replace(det, measurement_cov=np.diag([sc * sc, sc * sc, sr * sr]))
 
