@@ -22,6 +22,7 @@ __all__ = [
     "look_at_pose",
     "pixel_rays",
     "project_point",
+    "project_points",
     "ray_frame",
     "skew",
     "unit",
@@ -149,6 +150,16 @@ def project_point(p_camera: np.ndarray, focal_px: float, width_px: int, height_p
     u = 0.5 * width_px - focal_px * p[1] / p[0]
     v = 0.5 * height_px - focal_px * p[2] / p[0]
     return np.array([u, v])
+
+
+def project_points(t_camera: np.ndarray, focal_px: float, width_px: int, height_px: int) -> np.ndarray:
+    """Pixels (u, v) of points (N, 3) in the camera frame, (N, 2): :func:`project_point` for
+    many at once. No check of the depth: the caller masks the points behind the camera (and
+    passes them a depth that does not divide by zero)."""
+    t = np.atleast_2d(np.asarray(t_camera, dtype=float))
+    return np.column_stack(
+        [0.5 * width_px - focal_px * t[:, 1] / t[:, 0], 0.5 * height_px - focal_px * t[:, 2] / t[:, 0]]
+    )
 
 
 def pixel_rays(uv: np.ndarray, focal_px: float, width_px: int, height_px: int) -> np.ndarray:

@@ -16,6 +16,8 @@ import math
 
 import numpy as np
 
+from bve_mj.geometry import project_points
+
 __all__ = ["image_discs", "visible_arc_deg"]
 
 _SAMPLES = 72  # points on each outline (5° apart)
@@ -41,9 +43,7 @@ def image_discs(
     rho = np.linalg.norm(t, axis=1)
     front = (t[:, 0] > 1e-6) & (rho > r)
     tx = np.where(front, t[:, 0], 1.0)
-    uv = np.column_stack(
-        [0.5 * width_px - focal_px * t[:, 1] / tx, 0.5 * height_px - focal_px * t[:, 2] / tx]
-    )
+    uv = project_points(np.column_stack([tx, t[:, 1:]]), focal_px, width_px, height_px)
     alpha = np.arcsin(np.clip(r / np.maximum(rho, 1e-12), 0.0, 1.0))
     radius_px = np.where(front, focal_px * np.tan(np.minimum(alpha, 1.5)), 0.0)
     return uv, radius_px, front

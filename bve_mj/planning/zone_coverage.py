@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bve_mj.geometry import camera_rotation
+from bve_mj.geometry import camera_rotation, project_points
 
 __all__ = ["GRID_STEPS", "ZoneCoverage", "zone_grid"]
 
@@ -86,8 +86,9 @@ class ZoneCoverage:
         rho = np.linalg.norm(t, axis=1)
         front = (t[:, 0] > self.fruit_radius_m) & (rho <= self.max_range_m)
         depth = np.where(front, t[:, 0], 1.0)
-        u = 0.5 * self.width_px - self.focal_px * t[:, 1] / depth
-        v = 0.5 * self.height_px - self.focal_px * t[:, 2] / depth
+        u, v = project_points(
+            np.column_stack([depth, t[:, 1:]]), self.focal_px, self.width_px, self.height_px
+        ).T
         margin = _MARGIN_SHARE * self.focal_px * self.fruit_radius_m / depth
         inside_u = (u >= margin) & (u <= self.width_px - margin)
         inside_v = (v >= margin) & (v <= self.height_px - margin)
