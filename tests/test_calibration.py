@@ -390,3 +390,70 @@ def test_calibrate_says_what_the_shipped_model_claims_of_the_fruits_offset():
     from dataclasses import replace
 
     assert len(offset_lines(replace(model, centre_offset_terms=()))) == 1
+
+
+def test_fruits_of_one_scene_are_fitted_as_separate_fruits(rng):
+    """The every-fruit rows put several fruits in one scene: each fruit's own offset is its own
+    (keyed by ``fruit``), so the neighbour-conditioned offset is learnt as well as with one
+    fruit per scene; pooled per scene, the four fruits' offsets would average out."""
+    from bve_mj.estimation.noise import Outline
+
+    rows = _synthetic_rows(rng, fruits=120, views=10, offset_rel=lambda n: 0.001 + 0.015 * n)
+    for r in rows:
+        k = r["scene_seed"]
+        r.update(scene_seed=k // 4, fruit=k % 4, source="every")
+    model, report = fit_noise_model(rows, CameraConfig(), "test")
+    assert report["fruits"] == 120
+
+    def sigma_rel(neighbour):
+        return math.sqrt(np.trace(model.centre_offset_cov(0.03, 0.9, [Outline(neighbour)] * 3)) / 3) / 0.03
+
+    assert sigma_rel(0.0) < 0.004 and 0.006 < sigma_rel(0.5) < 0.014
+
+
+def test_every_fruit_rows_match_each_detection_to_the_fruit_it_measured():
+    """In one view: a detection on each of two fruits (one 2 px off), one on no fruit, a
+    refusal of a third fruit and one of a fruit already measured: two measured rows with the
+    right fruit and error, one refused row, nothing for the stray detection."""
+    from types import SimpleNamespace
+
+    from bve_mj.campaigns.calibration import _every_fruit_rows
+    from bve_mj.perception.all_fruit import FruitDetections, Refusal
+    from bve_mj.perception.detection import Intrinsics
+
+    cam = CameraConfig()
+    intrinsics = Intrinsics.from_camera(cam)
+    f = intrinsics.focal_px
+    p = np.array([0.0, 0.0, 0.3])
+    R = camera_rotation(p, np.array([0.4, 0.0, 0.3]))
+    fruits = [
+        SimpleNamespace(centre_m=np.array(c), radius_m=0.03, shape_index=0.9, colour="red")
+        for c in ([0.4, 0.0, 0.3], [0.42, 0.07, 0.31], [0.4, -0.08, 0.28], [-0.3, 0.0, 0.3])
+    ]  # the last behind the camera
+
+    def detection(i, shift_px=(0.0, 0.0)):
+        t = R.T @ (fruits[i].centre_m - p)
+        uv = intrinsics.project(t) + np.array(shift_px)
+        ray = intrinsics.rays(uv)[0]
+        alpha = math.asin(0.03 / np.linalg.norm(t))
+        return SimpleNamespace(
+            centre_px=uv, bearing_camera=ray / np.linalg.norm(ray), angular_radius_rad=alpha,
+            radius_px=f * math.tan(alpha), arc_deg=300.0, trimmed_fraction=0.1, centre_fit_px=0.2,
+            radius_fit_px=0.2, centre_jackknife_px=0.0, radius_jackknife_px=0.0,
+            neighbour_share=0.2, centre_disagreement_px=0.0,
+        )  # fmt: skip
+
+    stray = detection(0, (200.0, 0.0))
+    uv2 = detection(2).centre_px
+    found = FruitDetections(
+        (detection(0), detection(1, (2.0, 0.0)), stray),
+        (Refusal(uv2, 40.0, "too little outline", True), Refusal(detection(0).centre_px, 40.0, "fragment")),
+    )
+    view = {"scenario": "s", "scene_seed": 1, "view": 3, "aim_sigma_m": 0.0, "fruit_shape_index": 0.9,
+            "camera_position_m": p.tolist(), "camera_rotation": R.tolist()}  # fmt: skip
+    rows = _every_fruit_rows(found, fruits, p, R, intrinsics, view)
+    assert [(r["fruit"], r["detected"]) for r in rows] == [(0, True), (1, True), (2, False)]
+    assert all(r["source"] == "every" and r["scene_seed"] == 1 for r in rows)
+    assert abs(rows[0]["err_u_px"]) < 1e-6 and abs(rows[0]["err_alpha_px"]) < 1e-6
+    # the image's u grows to the right, the camera frame's y to the left: 2 px right is -2 in u
+    assert math.hypot(rows[1]["err_u_px"], rows[1]["err_v_px"]) == pytest.approx(2.0, abs=0.1)

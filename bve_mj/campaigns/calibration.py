@@ -8,8 +8,14 @@ covariance saying so). Every detection is compared with the truth: the error of 
 bearing of the centre (the two normalised image coordinates) and of the apparent
 (equatorial) angular radius, in pixels (f · angle), beside what the detector saw (apparent
 radius, share of the outline, trimmed share, the fit's own σ and the arcs' jackknife
-spread). :func:`bve_mj.estimation.noise_fit.fit_noise_model` turns the samples into the
-noise model the filter uses.
+spread). The every-fruit detector (``--fruits all``) measures the same image: each fruit it
+measured or refused is a row too, matched to the true fruit (``fruit``, its index in the
+scene; ``source: "every"``). The filter fuses what both detectors measure, so the model is
+fitted to both: the every-fruit rows bring the fruit beside the target (seen off the optical
+axis, behind and between their neighbours, of every ripeness the mask takes) that the target's
+views alone sample only as the target. :func:`bve_mj.estimation.noise_fit.fit_noise_model`
+turns the samples into the noise model the filter uses, each fruit's rows its own
+(:func:`bve_mj.estimation.noise_tail.fruit_key`).
 
 Sensor realism is off here (no image noise unless the scenario asks for it, no calibration
 error, exact encoders): the camera's calibration error and the encoders' noise are declared
@@ -41,12 +47,17 @@ _AIM_SIGMA_M = (0.0005, 0.008)  # the loop's estimate error when it looks (its �
 _ATTEMPTS = 8  # candidate poses tried per view asked for (the arm reaches about a third)
 
 
-def sample_views(name: str, settings: Any, scene_seed: int, views: int) -> list[dict[str, Any]]:
+def sample_views(
+    name: str, settings: Any, scene_seed: int, views: int, every_fruit: bool = True
+) -> list[dict[str, Any]]:
     """Render ``views`` look-at views of the target of one seeded scene of ``settings``
     (closed-loop settings of a scenario) and detect it in each: one row per view that
-    the arm could take, with the detector's answer and the truth."""
+    the arm could take, with the detector's answer and the truth. With ``every_fruit``,
+    also one row per fruit the every-fruit detector (``--fruits all``) measured in the same
+    image, matched to the true fruit it measured (``fruit``: its index in the scene)."""
     import mujoco
 
+    from bve_mj.perception.all_fruit import detect_all
     from bve_mj.perception.detection import Detection, Intrinsics, Prediction
     from bve_mj.perception.detector import detect
     from bve_mj.robot import IkOptions, arm_kinematics, look_at_ik
@@ -115,29 +126,101 @@ def sample_views(name: str, settings: Any, scene_seed: int, views: int) -> list[
                 "truth_m": truth.tolist(),
             }
             if isinstance(det, Detection):
-                a = det.bearing_camera
-                alpha_true = math.asin(min(target.radius_m / float(np.linalg.norm(t)), 1.0))
-                row.update(
-                    detected=True,
-                    radius_px=det.radius_px,
-                    arc_deg=det.arc_deg,
-                    trimmed_fraction=det.trimmed_fraction,
-                    centre_fit_px=det.centre_fit_px,
-                    radius_fit_px=det.radius_fit_px,
-                    centre_jackknife_px=det.centre_jackknife_px,
-                    radius_jackknife_px=det.radius_jackknife_px,
-                    neighbour_share=det.neighbour_share,
-                    centre_disagreement_px=det.centre_disagreement_px,
-                    err_u_px=float(f * (a[1] / a[0] - t[1] / t[0])),
-                    err_v_px=float(f * (a[2] / a[0] - t[2] / t[0])),
-                    err_alpha_px=float(f * (det.angular_radius_rad - alpha_true)),
-                )
-
+                row.update(_detection_fields(det, t, target.radius_m, f))
             else:
                 row.update(detected=False, reason=det.reason)
             rows.append(row)
+            if every_fruit:
+                found = detect_all(
+                    image, intrinsics, fruit, measurement, settings.detector,
+                    up_camera=R.T[:, 2], max_range_m=settings.tracking.max_range_m,
+                )  # fmt: skip
+                rows += _every_fruit_rows(found, info.fruits, p, R, intrinsics, row)
     finally:
         renderer.close()
+    return rows
+
+
+def _detection_fields(det: Any, t_camera: np.ndarray, radius_m: float, focal_px: float) -> dict[str, Any]:
+    """What the detector saw of a fruit whose centre lies at ``t_camera`` [m] (camera frame)
+    and its errors against the truth: bearing (u, v) and apparent angular radius, in px."""
+    a = det.bearing_camera
+    t = t_camera
+    alpha_true = math.asin(min(radius_m / float(np.linalg.norm(t)), 1.0))
+    return {
+        "detected": True,
+        "radius_px": det.radius_px,
+        "arc_deg": det.arc_deg,
+        "trimmed_fraction": det.trimmed_fraction,
+        "centre_fit_px": det.centre_fit_px,
+        "radius_fit_px": det.radius_fit_px,
+        "centre_jackknife_px": det.centre_jackknife_px,
+        "radius_jackknife_px": det.radius_jackknife_px,
+        "neighbour_share": det.neighbour_share,
+        "centre_disagreement_px": det.centre_disagreement_px,
+        "err_u_px": float(focal_px * (a[1] / a[0] - t[1] / t[0])),
+        "err_v_px": float(focal_px * (a[2] / a[0] - t[2] / t[0])),
+        "err_alpha_px": float(focal_px * (det.angular_radius_rad - alpha_true)),
+    }
+
+
+_MATCH_RADII = 0.5  # an every-fruit detection is of the fruit whose centre's image lies this
+# many of its apparent radii from its centre (or nearer); one farther from every fruit is none
+
+
+def _every_fruit_rows(
+    found: Any,
+    fruits: Sequence[Any],
+    p_world_camera: np.ndarray,
+    R_world_camera: np.ndarray,
+    intrinsics: Any,
+    view_row: dict[str, Any],
+) -> list[dict[str, Any]]:
+    """The every-fruit detector's answer in one view (``found``: its
+    :class:`~bve_mj.perception.all_fruit.FruitDetections`) as rows: one per detection matched
+    to the true fruit it measured (the one whose image lies nearest its centre, in apparent
+    radii, within :data:`_MATCH_RADII`), and one ``detected: False`` row per fruit that view
+    refused (seen in part, a poor fit ...) and did not measure: the refusal scale needs each
+    fruit's refused share. The view's own fields (scenario, scene, camera) from ``view_row``."""
+    f = intrinsics.focal_px
+    seen = []
+    for i, fr in enumerate(fruits):
+        t = R_world_camera.T @ (fr.centre_m - p_world_camera)
+        dist = float(np.linalg.norm(t))
+        if t[0] <= fr.radius_m or dist <= fr.radius_m:
+            continue
+        r_px = f * math.tan(math.asin(fr.radius_m / dist))
+        seen.append((i, fr, t, dist, intrinsics.project(t), r_px))
+
+    def match(centre_px: np.ndarray) -> tuple[Any, ...] | None:
+        if not seen:
+            return None
+        best = min(seen, key=lambda s: float(np.linalg.norm(centre_px - s[4])) / s[5])
+        return best if float(np.linalg.norm(centre_px - best[4])) <= _MATCH_RADII * best[5] else None
+
+    view = {k: view_row[k] for k in ("scenario", "scene_seed", "view", "aim_sigma_m", "fruit_shape_index",
+                                     "camera_position_m", "camera_rotation")}  # fmt: skip
+
+    def fruit_fields(i: int, fr: Any, t: np.ndarray, dist: float) -> dict[str, Any]:
+        return {
+            **view, "source": "every", "fruit": i, "distance_m": dist,
+            "off_axis_px": float(f * math.hypot(t[1], t[2]) / t[0]), "true_radius_m": fr.radius_m,
+            "shape_index": fr.shape_index, "colour": fr.colour, "truth_m": fr.centre_m.tolist(),
+        }  # fmt: skip
+
+    rows, measured, refused = [], set(), set()
+    for det in found.detections:
+        m = match(det.centre_px)
+        if m is not None:
+            i, fr, t, dist, _, _ = m
+            rows.append({**fruit_fields(i, fr, t, dist), **_detection_fields(det, t, fr.radius_m, f)})
+            measured.add(i)
+    for ref in found.refused:
+        m = None if ref.centre_px is None else match(ref.centre_px)
+        if m is not None and m[0] not in measured and m[0] not in refused:
+            i, fr, t, dist, _, _ = m
+            rows.append({**fruit_fields(i, fr, t, dist), "detected": False, "reason": ref.reason})
+            refused.add(i)
     return rows
 
 
@@ -231,6 +314,10 @@ def calibrate(
     names = ",".join(data.scenarios)
     source = f"bve-mj calibrate: scenarios {names}; {scenes} scenes x {views} views each, seed {seed}"
     model, report = fit_noise_model(data.rows, camera, source)  # the refusals fit the refusal scale
-    report["views"] = len(data.rows)
-    report["refused"] = len(data.rows) - len(data.detections)
+    target = [r for r in data.rows if r.get("source") != "every"]
+    every = [r for r in data.rows if r.get("source") == "every"]
+    report["views"] = len(target)
+    report["refused"] = sum(not r.get("detected") for r in target)
+    report["every_fruit_detections"] = sum(bool(r.get("detected")) for r in every)
+    report["every_fruit_refused"] = len(every) - report["every_fruit_detections"]
     return model, report, data

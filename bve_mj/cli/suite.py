@@ -159,8 +159,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         suite, scenes=scenes, views=views, seed=seed, workers=workers, progress=progress_printer(show)
     )
     print(
-        f"{report['views']} views rendered, {report['refused']} refused, {report['detections']} fitted, "
-        f"{report['gross_errors']} gross errors (> 6σ: the wrong fruit; left to the filter's gate)"
+        f"{report['views']} views rendered, the target refused in {report['refused']}; every fruit in them "
+        f"(the every-fruit detector): {report['every_fruit_detections']} measured, "
+        f"{report['every_fruit_refused']} refused; {report['detections']} fitted, {report['gross_errors']} "
+        "gross errors (> 6σ: the wrong fruit; left to the filter's gate)"
     )
     for name, coef in (("centre", model.centre_var_px2), ("radius", model.radius_var_px2)):
         r = report[name]

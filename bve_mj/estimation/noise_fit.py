@@ -15,7 +15,7 @@ import numpy as np
 from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.noise import OFFSET_FEATURES, NoiseModel, Outline
-from bve_mj.estimation.noise_tail import tail_scale, view_tail_scale
+from bve_mj.estimation.noise_tail import FruitKey, fruit_key, tail_scale, view_tail_scale
 from bve_mj.estimation.view_correlation import ViewCorrelation, fit_view_correlation
 
 __all__ = ["GROSS_SIGMAS", "fit_noise_model", "noise_report"]
@@ -137,15 +137,15 @@ def _fit(det: Sequence[dict[str, Any]], camera: CameraConfig, source: str) -> No
 
 def _fruit_offsets(
     det: Sequence[dict[str, Any]], model: NoiseModel, focal_px: float
-) -> dict[tuple[Any, Any], tuple[np.ndarray, np.ndarray, float]]:
+) -> dict[FruitKey, tuple[np.ndarray, np.ndarray, float]]:
     """Each fruit's own world-frame offset of the fitted centre: per fruit (the rows of one
     scenario and scene, 6 views or more), the weighted least-squares offset b [m] that its
     views' lateral errors (each bearing error times the range, along the camera's y and z
     axes) share, its covariance C from the per-view noise of ``model``, and its radius."""
-    groups: dict[tuple[Any, Any], list[dict[str, Any]]] = {}
+    groups: dict[FruitKey, list[dict[str, Any]]] = {}
     for r in det:
         if "camera_rotation" in r:
-            groups.setdefault((r["scenario"], r["scene_seed"]), []).append(r)
+            groups.setdefault(fruit_key(r), []).append(r)
     out = {}
     for key, rows in groups.items():
         if len(rows) < 6:
@@ -170,14 +170,14 @@ def _fruit_offsets(
 
 def _without_offsets(
     det: Sequence[dict[str, Any]],
-    offsets: dict[tuple[Any, Any], tuple[np.ndarray, np.ndarray, float]],
+    offsets: dict[FruitKey, tuple[np.ndarray, np.ndarray, float]],
     focal_px: float,
 ) -> list[dict[str, Any]]:
     """The rows with their fruit's offset taken out of the bearing errors: what is left is
     each view's own error."""
     out = []
     for r in det:
-        found = offsets.get((r.get("scenario"), r.get("scene_seed")))
+        found = offsets.get(fruit_key(r))
         if found is None:
             out.append(r)
             continue
@@ -194,7 +194,7 @@ def _without_offsets(
 
 
 def _offset_bound(
-    offsets: dict[tuple[Any, Any], tuple[np.ndarray, np.ndarray, float]],
+    offsets: dict[FruitKey, tuple[np.ndarray, np.ndarray, float]],
 ) -> tuple[float, float]:
     """(β_h, β_v): the fruit's own offset bounded as N(0, diag(β_h, β_h, β_v)² r²), its shape
     from the offsets' spread (mean of b² - diag C over fruits, horizontal and vertical) and
@@ -220,22 +220,19 @@ def _offset_bound(
     return (math.sqrt(hi * h), math.sqrt(hi * v))
 
 
-Fruit = tuple[Any, Any]
-
-
-def _seen(det: Sequence[dict[str, Any]]) -> dict[Fruit, tuple[float, list[Outline]]]:
+def _seen(det: Sequence[dict[str, Any]]) -> dict[FruitKey, tuple[float, list[Outline]]]:
     """Per fruit (scenario, scene): its type's shape index and what its detections saw."""
-    out: dict[Fruit, tuple[float, list[Outline]]] = {}
+    out: dict[FruitKey, tuple[float, list[Outline]]] = {}
     for r in det:
-        key = (r.get("scenario"), r.get("scene_seed"))
+        key = fruit_key(r)
         _, outlines = out.setdefault(key, (float(r.get("fruit_shape_index", 1.0)), []))
         outlines.append(Outline(float(r.get("neighbour_share", 0.0))))
     return out
 
 
 def _offset_terms(
-    offsets: dict[Fruit, tuple[np.ndarray, np.ndarray, float]],
-    seen: dict[Fruit, tuple[float, list[Outline]]],
+    offsets: dict[FruitKey, tuple[np.ndarray, np.ndarray, float]],
+    seen: dict[FruitKey, tuple[float, list[Outline]]],
     model: NoiseModel,
 ) -> tuple[float, ...]:
     """The coefficients (3,) of the fruit's own offset's variance on :data:`OFFSET_FEATURES`
@@ -286,10 +283,10 @@ def _refusal_scale(rows: Sequence[dict[str, Any]], model: NoiseModel) -> tuple[f
     one never refused."""
     from scipy.optimize import minimize
 
-    groups: dict[tuple[Any, Any], list[dict[str, Any]]] = {}
+    groups: dict[FruitKey, list[dict[str, Any]]] = {}
     for r in rows:
         if "scenario" in r and "scene_seed" in r:
-            groups.setdefault((r["scenario"], r["scene_seed"]), []).append(r)
+            groups.setdefault(fruit_key(r), []).append(r)
     share, total, count = [], [], []
     for views in groups.values():
         det = [r for r in views if r.get("detected")]
@@ -329,7 +326,7 @@ def _view_correlations(
     their camera position and the truth): per pair, the cosine of the angle between the
     directions from the fruit to the two cameras and the products of their normalised errors
     (the centre's as the world-frame lateral error vectors' dot product over 2)."""
-    groups: dict[tuple[Any, Any], list[tuple[np.ndarray, np.ndarray, float]]] = {}
+    groups: dict[FruitKey, list[tuple[np.ndarray, np.ndarray, float]]] = {}
     for r in det:
         if "camera_position_m" not in r or "camera_rotation" not in r:
             continue
@@ -338,9 +335,7 @@ def _view_correlations(
         sc, sr = _row_sigmas(model, r)
         lateral = (R[:, 1] * r["err_u_px"] + R[:, 2] * r["err_v_px"]) / sc
         z_radius = (r["err_alpha_px"] - model.radius_bias(r["radius_px"])) / sr
-        groups.setdefault((r["scenario"], r["scene_seed"]), []).append(
-            (d / np.linalg.norm(d), lateral, z_radius)
-        )
+        groups.setdefault(fruit_key(r), []).append((d / np.linalg.norm(d), lateral, z_radius))
     cos, centre, radius = [], [], []
     for views in groups.values():
         for i, (di, ci, ri) in enumerate(views):

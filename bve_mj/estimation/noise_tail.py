@@ -12,7 +12,26 @@ import numpy as np
 
 from bve_mj.estimation.noise import INNOVATION_PRIOR_DOF, NoiseModel, Outline
 
-__all__ = ["TAIL_BOOTSTRAP", "TAIL_BOUND", "TAIL_DRAWS", "TAIL_PROBABILITY", "tail_scale", "view_tail_scale"]
+__all__ = [
+    "TAIL_BOOTSTRAP",
+    "TAIL_BOUND",
+    "TAIL_DRAWS",
+    "TAIL_PROBABILITY",
+    "FruitKey",
+    "fruit_key",
+    "tail_scale",
+    "view_tail_scale",
+]
+
+FruitKey = tuple[Any, Any, Any]
+
+
+def fruit_key(row: dict[str, Any]) -> FruitKey:
+    """The calibration fruit a row measured: (scenario, scene seed, fruit), ``fruit`` the
+    index of the fruit in its scene for the every-fruit detector's rows and ``"target"`` for
+    the target's (the same fruit seen by the two detectors counts as two: their errors differ)."""
+    return (row.get("scenario"), row.get("scene_seed"), row.get("fruit", "target"))
+
 
 TAIL_PROBABILITY = 0.999
 
@@ -58,10 +77,10 @@ def tail_scale(
     from bve_mj.estimation.models import BearingSizeModel
     from bve_mj.estimation.view_correlation import new_view_share
 
-    views_of: dict[tuple[Any, Any], list[dict[str, Any]]] = {}
+    views_of: dict[FruitKey, list[dict[str, Any]]] = {}
     for r in kept:
         if "camera_rotation" in r and "camera_position_m" in r and "truth_m" in r:
-            views_of.setdefault((r.get("scenario"), r.get("scene_seed")), []).append(r)
+            views_of.setdefault(fruit_key(r), []).append(r)
     shares = _refusals([*kept, *refused])
     fruits = {key: rows for key, rows in views_of.items() if len(rows) >= 4}
     if len(fruits) < 20:
@@ -147,7 +166,7 @@ def view_tail_scale(
             R = np.asarray(r["camera_rotation"], dtype=float)[:, 1:3]
             k = focal_px / r["distance_m"]  # the fruit's offset [m] seen across the view [px]
             lateral = lateral + k**2 * (R.T @ model.centre_bias_cov(r["true_radius_m"]) @ R)
-        views = refused_of.get((r.get("scenario"), r.get("scene_seed")), [False])
+        views = refused_of.get(fruit_key(r), [False])
         scale = math.exp(model.refusal_scale * sum(views) / len(views))
         e = np.array([-r["err_u_px"], -r["err_v_px"]])  # camera y left, z up: u right, v down
         ea = r["err_alpha_px"] - model.radius_bias(r["radius_px"])
@@ -158,9 +177,9 @@ def view_tail_scale(
     return max(1.0, ratio)
 
 
-def _refusals(rows: Sequence[dict[str, Any]]) -> dict[tuple[Any, Any], list[bool]]:
+def _refusals(rows: Sequence[dict[str, Any]]) -> dict[FruitKey, list[bool]]:
     """Per fruit (scenario, scene), whether the detector refused each of its views."""
-    out: dict[tuple[Any, Any], list[bool]] = {}
+    out: dict[FruitKey, list[bool]] = {}
     for r in rows:
-        out.setdefault((r.get("scenario"), r.get("scene_seed")), []).append(not r.get("detected"))
+        out.setdefault(fruit_key(r), []).append(not r.get("detected"))
     return out
