@@ -457,3 +457,19 @@ def test_every_fruit_rows_match_each_detection_to_the_fruit_it_measured():
     assert abs(rows[0]["err_u_px"]) < 1e-6 and abs(rows[0]["err_alpha_px"]) < 1e-6
     # the image's u grows to the right, the camera frame's y to the left: 2 px right is -2 in u
     assert math.hypot(rows[1]["err_u_px"], rows[1]["err_v_px"]) == pytest.approx(2.0, abs=0.1)
+    # the target (its own rows measure it) gives no every-fruit row
+    kept = _every_fruit_rows(found, fruits, p, R, intrinsics, view, exclude=0)
+    assert [(r["fruit"], r["detected"]) for r in kept] == [(1, True), (2, False)]
+
+
+def test_calibrate_every_fruit_adds_the_neighbours_rows(tmp_path, capsys):
+    out, rows = tmp_path / "model.json", tmp_path / "rows.json"
+    argv = ["calibrate", "--only", "ripe_truss", "--scenes", "2", "--views", "6", "--every-fruit"]
+    argv += ["--seed", "5", "--workers", "1", "--out", str(out), "--json", str(rows), "--quiet"]
+    assert main(argv) == 0
+    doc = json.loads(rows.read_text())
+    every = [r for r in doc["rows"] if r.get("source") == "every"]
+    assert every and all(r["fruit"] != 0 for r in every)  # neighbours, never the target again
+    assert sum(r.get("source") != "every" for r in doc["rows"]) == 12
+    assert "its neighbours" in capsys.readouterr().out
+    assert "every fruit" in load_noise_model(str(out)).source

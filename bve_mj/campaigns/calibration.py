@@ -8,8 +8,9 @@ covariance saying so). Every detection is compared with the truth: the error of 
 bearing of the centre (the two normalised image coordinates) and of the apparent
 (equatorial) angular radius, in pixels (f · angle), beside what the detector saw (apparent
 radius, share of the outline, trimmed share, the fit's own σ and the arcs' jackknife
-spread). The every-fruit detector (``--fruits all``) measures the same image: each fruit it
-measured or refused is a row too, matched to the true fruit (``fruit``, its index in the
+spread). With ``every_fruit`` (``bve-mj calibrate --every-fruit``), the every-fruit detector
+(``--fruits all``) measures the same image too: each neighbour of the target it measured or
+refused is a row, matched to the true fruit (``fruit``, its index in the
 scene; ``source: "every"``). The filter fuses what both detectors measure, so the model is
 fitted to both: the every-fruit rows bring the fruit beside the target (seen off the optical
 axis, behind and between their neighbours, of every ripeness the mask takes) that the target's
@@ -48,13 +49,14 @@ _ATTEMPTS = 8  # candidate poses tried per view asked for (the arm reaches about
 
 
 def sample_views(
-    name: str, settings: Any, scene_seed: int, views: int, every_fruit: bool = True
+    name: str, settings: Any, scene_seed: int, views: int, every_fruit: bool = False
 ) -> list[dict[str, Any]]:
     """Render ``views`` look-at views of the target of one seeded scene of ``settings``
     (closed-loop settings of a scenario) and detect it in each: one row per view that
     the arm could take, with the detector's answer and the truth. With ``every_fruit``,
     also one row per fruit the every-fruit detector (``--fruits all``) measured in the same
-    image, matched to the true fruit it measured (``fruit``: its index in the scene)."""
+    image, matched to the true fruit it measured (``fruit``: its index in the scene), but
+    the target: its own rows measure it."""
     import mujoco
 
     from bve_mj.perception.all_fruit import detect_all
@@ -135,7 +137,7 @@ def sample_views(
                     image, intrinsics, fruit, measurement, settings.detector,
                     up_camera=R.T[:, 2], max_range_m=settings.tracking.max_range_m,
                 )  # fmt: skip
-                rows += _every_fruit_rows(found, info.fruits, p, R, intrinsics, row)
+                rows += _every_fruit_rows(found, info.fruits, p, R, intrinsics, row, exclude=0)
     finally:
         renderer.close()
     return rows
@@ -175,13 +177,17 @@ def _every_fruit_rows(
     R_world_camera: np.ndarray,
     intrinsics: Any,
     view_row: dict[str, Any],
+    *,
+    exclude: int | None = None,
 ) -> list[dict[str, Any]]:
     """The every-fruit detector's answer in one view (``found``: its
     :class:`~bve_mj.perception.all_fruit.FruitDetections`) as rows: one per detection matched
     to the true fruit it measured (the one whose image lies nearest its centre, in apparent
     radii, within :data:`_MATCH_RADII`), and one ``detected: False`` row per fruit that view
     refused (seen in part, a poor fit ...) and did not measure: the refusal scale needs each
-    fruit's refused share. The view's own fields (scenario, scene, camera) from ``view_row``."""
+    fruit's refused share. The view's own fields (scenario, scene, camera) from ``view_row``.
+    A detection or refusal of fruit ``exclude`` (the target, which its own rows measure) is
+    matched but gives no row: a scene of one fruit would otherwise count it twice."""
     f = intrinsics.focal_px
     seen = []
     for i, fr in enumerate(fruits):
@@ -211,28 +217,28 @@ def _every_fruit_rows(
     rows, measured, refused = [], set(), set()
     for det in found.detections:
         m = match(det.centre_px)
-        if m is not None:
+        if m is not None and m[0] != exclude:
             i, fr, t, dist, _, _ = m
             rows.append({**fruit_fields(i, fr, t, dist), **_detection_fields(det, t, fr.radius_m, f)})
             measured.add(i)
     for ref in found.refused:
         m = None if ref.centre_px is None else match(ref.centre_px)
-        if m is not None and m[0] not in measured and m[0] not in refused:
+        if m is not None and m[0] not in measured and m[0] not in refused and m[0] != exclude:
             i, fr, t, dist, _, _ = m
             rows.append({**fruit_fields(i, fr, t, dist), "detected": False, "reason": ref.reason})
             refused.add(i)
     return rows
 
 
-Task = tuple[str, Any, int, int]
+Task = tuple[str, Any, int, int, bool]
 
 
 def _run_task(task: Task) -> list[dict[str, Any]]:
     from bve_mj.threads import one_blas_thread
 
-    name, settings, scene_seed, views = task
+    name, settings, scene_seed, views, every_fruit = task
     with one_blas_thread():
-        return sample_views(name, settings, scene_seed, views)
+        return sample_views(name, settings, scene_seed, views, every_fruit)
 
 
 @dataclass(frozen=True)
@@ -259,8 +265,10 @@ def run_calibration(
     seed: int = 1,
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
+    every_fruit: bool = False,
 ) -> CalibrationData:
-    """``views`` views of ``scenes`` seeded scenes of every scenario, in spawned workers."""
+    """``views`` views of ``scenes`` seeded scenes of every scenario, in spawned workers
+    (with ``every_fruit``, the every-fruit detector's rows too: :func:`sample_views`)."""
     from bve_mj.campaigns.executors import local_batches
     from bve_mj.campaigns.spec import episode_seed
 
@@ -272,7 +280,7 @@ def run_calibration(
         raise ConfigError("workers", workers, "an integer >= 1")
     t0 = time.perf_counter()
     tasks: list[Task] = [
-        (sc.name, sc.settings("camera"), episode_seed(seed, k), views)
+        (sc.name, sc.settings("camera"), episode_seed(seed, k), views, every_fruit)
         for sc in scenarios
         for k in range(scenes)
     ]
@@ -297,14 +305,16 @@ def calibrate(
     seed: int = 1,
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
+    every_fruit: bool = False,
 ) -> tuple[NoiseModel, dict[str, Any], CalibrationData]:
     """Render and detect (:func:`run_calibration`), then fit the noise model
     (:func:`~bve_mj.estimation.noise_fit.fit_noise_model`): the model, how well it describes the
     samples, and the samples. The default seed (1) keeps the scenario suite's episodes
     (seeds 0 and 7777 there) out of the calibration."""
     data = run_calibration(
-        scenarios, scenes=scenes, views=views, seed=seed, workers=workers, progress=progress
-    )
+        scenarios, scenes=scenes, views=views, seed=seed, workers=workers, progress=progress,
+        every_fruit=every_fruit,
+    )  # fmt: skip
     camera = scenarios[0].settings("camera").camera
     for sc in scenarios[1:]:
         if sc.settings("camera").camera != camera:
@@ -313,6 +323,8 @@ def calibrate(
             )
     names = ",".join(data.scenarios)
     source = f"bve-mj calibrate: scenarios {names}; {scenes} scenes x {views} views each, seed {seed}"
+    if every_fruit:
+        source += "; every fruit"
     model, report = fit_noise_model(data.rows, camera, source)  # the refusals fit the refusal scale
     target = [r for r in data.rows if r.get("source") != "every"]
     every = [r for r in data.rows if r.get("source") == "every"]

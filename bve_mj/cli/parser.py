@@ -220,6 +220,12 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--seed", default="1", help="base seed (default 1: not the suite's 0)")
     cal.add_argument("--workers", default=None, help="local processes (default: all cores)")
     cal.add_argument("--json", default=None, help="write every view's detection and error here")
+    cal.add_argument(
+        "--every-fruit",
+        action="store_true",
+        help="also fit the every-fruit detector's measurements of the target's neighbours "
+        "(--fruits all); the shipped model is fitted without",
+    )
     cal.add_argument("--quiet", action="store_true", help="no progress on stderr")
     res = sub.add_parser(
         "results",
