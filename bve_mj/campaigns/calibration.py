@@ -11,10 +11,11 @@ radius, share of the outline, trimmed share, the fit's own σ and the arcs' jack
 spread). With ``every_fruit`` (``bve-mj calibrate --every-fruit``), the every-fruit detector
 (``--fruits all``) measures the same image too: each neighbour of the target it measured or
 refused is a row, matched to the true fruit (``fruit``, its index in the
-scene; ``source: "every"``). The filter fuses what both detectors measure, so the model is
-fitted to both: the every-fruit rows bring the fruit beside the target (seen off the optical
-axis, behind and between their neighbours, of every ripeness the mask takes) that the target's
-views alone sample only as the target. :func:`bve_mj.estimation.noise_fit.fit_noise_model`
+scene; ``source: "every"``): the fruit beside the target that ``--fruits all`` fuses too
+(seen off the optical axis, behind and between their neighbours, of every ripeness the mask
+takes), which the target's views alone never sample. The shipped model is fitted without
+them: on held-out seeds they changed nothing (README, "Calibrating what the every-fruit
+filter fuses"). :func:`bve_mj.estimation.noise_fit.fit_noise_model`
 turns the samples into the noise model the filter uses, each fruit's rows its own
 (:func:`bve_mj.estimation.noise_tail.fruit_key`).
 
@@ -30,7 +31,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -38,6 +39,11 @@ from bve_mj.campaigns.scenarios import Scenario
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.noise import NoiseModel
 from bve_mj.estimation.noise_fit import fit_noise_model
+
+if TYPE_CHECKING:
+    from bve_mj.perception.all_fruit import FruitDetections
+    from bve_mj.perception.detection import Detection, Intrinsics
+    from bve_mj.sim.scene_model import Fruit
 
 __all__ = ["CalibrationData", "calibrate", "run_calibration", "sample_views"]
 
@@ -143,7 +149,9 @@ def sample_views(
     return rows
 
 
-def _detection_fields(det: Any, t_camera: np.ndarray, radius_m: float, focal_px: float) -> dict[str, Any]:
+def _detection_fields(
+    det: Detection, t_camera: np.ndarray, radius_m: float, focal_px: float
+) -> dict[str, Any]:
     """What the detector saw of a fruit whose centre lies at ``t_camera`` [m] (camera frame)
     and its errors against the truth: bearing (u, v) and apparent angular radius, in px."""
     a = det.bearing_camera
@@ -171,11 +179,11 @@ _MATCH_RADII = 0.5  # an every-fruit detection is of the fruit whose centre's im
 
 
 def _every_fruit_rows(
-    found: Any,
-    fruits: Sequence[Any],
+    found: FruitDetections,
+    fruits: Sequence[Fruit],
     p_world_camera: np.ndarray,
     R_world_camera: np.ndarray,
-    intrinsics: Any,
+    intrinsics: Intrinsics,
     view_row: dict[str, Any],
     *,
     exclude: int | None = None,
@@ -207,7 +215,7 @@ def _every_fruit_rows(
     view = {k: view_row[k] for k in ("scenario", "scene_seed", "view", "aim_sigma_m", "fruit_shape_index",
                                      "camera_position_m", "camera_rotation")}  # fmt: skip
 
-    def fruit_fields(i: int, fr: Any, t: np.ndarray, dist: float) -> dict[str, Any]:
+    def fruit_fields(i: int, fr: Fruit, t: np.ndarray, dist: float) -> dict[str, Any]:
         return {
             **view, "source": "every", "fruit": i, "distance_m": dist,
             "off_axis_px": float(f * math.hypot(t[1], t[2]) / t[0]), "true_radius_m": fr.radius_m,
