@@ -159,16 +159,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         suite, scenes=scenes, views=views, seed=seed, workers=workers, progress=progress_printer(show),
         every_fruit=args.every_fruit,
     )  # fmt: skip
+    neighbours = (
+        f"its neighbours (the every-fruit detector): {report['every_fruit_detections']} measured, "
+        f"{report['every_fruit_refused']} refused; "
+    )
     print(
         f"{report['views']} views rendered, the target refused in {report['refused']}; "
-        + (
-            f"its neighbours (the every-fruit detector): {report['every_fruit_detections']} measured, "
-            f"{report['every_fruit_refused']} refused; "
-            if args.every_fruit
-            else ""
-        )
-        + f"{report['detections']} fitted, {report['gross_errors']} gross errors (> 6σ: the wrong fruit; "
-        "left to the filter's gate)"
+        f"{neighbours if args.every_fruit else ''}{report['detections']} fitted, {report['gross_errors']} "
+        "gross errors (> 6σ: the wrong fruit; left to the filter's gate)"
     )
     for name, coef in (("centre", model.centre_var_px2), ("radius", model.radius_var_px2)):
         r = report[name]

@@ -139,7 +139,7 @@ def _fruit_offsets(
     det: Sequence[dict[str, Any]], model: NoiseModel, focal_px: float
 ) -> dict[FruitKey, tuple[np.ndarray, np.ndarray, float]]:
     """Each fruit's own world-frame offset of the fitted centre: per fruit (the rows of one
-    scenario and scene, 6 views or more), the weighted least-squares offset b [m] that its
+    :func:`fruit_key`, 6 views or more), the weighted least-squares offset b [m] that its
     views' lateral errors (each bearing error times the range, along the camera's y and z
     axes) share, its covariance C from the per-view noise of ``model``, and its radius."""
     groups: dict[FruitKey, list[dict[str, Any]]] = {}
@@ -221,7 +221,7 @@ def _offset_bound(
 
 
 def _seen(det: Sequence[dict[str, Any]]) -> dict[FruitKey, tuple[float, list[Outline]]]:
-    """Per fruit (scenario, scene): its type's shape index and what its detections saw."""
+    """Per fruit (:func:`fruit_key`): its type's shape index and what its detections saw."""
     out: dict[FruitKey, tuple[float, list[Outline]]] = {}
     for r in det:
         key = fruit_key(r)
@@ -322,7 +322,7 @@ def _view_correlations(
     det: Sequence[dict[str, Any]], model: NoiseModel
 ) -> tuple[ViewCorrelation, ViewCorrelation]:
     """ρ(θ) of the centre's and the apparent radius' per-view errors (the fruit's own offset
-    taken out), from every pair of views of one fruit (rows of one scenario and scene with
+    taken out), from every pair of views of one fruit (rows of one :func:`fruit_key` with
     their camera position and the truth): per pair, the cosine of the angle between the
     directions from the fruit to the two cameras and the products of their normalised errors
     (the centre's as the world-frame lateral error vectors' dot product over 2)."""

@@ -178,7 +178,7 @@ def view_tail_scale(
 
 
 def _refusals(rows: Sequence[dict[str, Any]]) -> dict[FruitKey, list[bool]]:
-    """Per fruit (scenario, scene), whether the detector refused each of its views."""
+    """Per fruit (:func:`fruit_key`), whether the detector refused each of its views."""
     out: dict[FruitKey, list[bool]] = {}
     for r in rows:
         out.setdefault(fruit_key(r), []).append(not r.get("detected"))
