@@ -293,3 +293,28 @@ def test_a_python_call_replays_the_command_lines_episode_whatever_blas_threads_t
         one = run_mujoco_episode(settings, 1575926413)
     np.testing.assert_array_equal(many.result.final.mean, one.result.final.mean)
     assert len(many.result.views) == len(one.result.views)
+
+
+def test_views_record_the_filters_own_belief_beside_a_wider_claim():
+    """With claims (here a tail scale of 4), each view records the claim and the filter's own
+    belief: the claim's covariance is 4 times the filter's, so its NEES is a quarter of the
+    filter's; without claims there is nothing beside the belief (``final_filter`` is it)."""
+    from bve_mj.config import FilterConfig
+    from bve_mj.estimation.belief import Belief
+    from bve_mj.loop.claims import Claims
+    from bve_mj.loop.episode import run_episode
+
+    truth = np.array([0.40, 0.0, 0.20])
+    points = [truth + [0.001, -0.002, 0.0], truth + [-0.001, 0.001, 0.001], truth + [0.0, 0.001, -0.002]]
+    prior = Belief.isotropic(np.array([0.41, 0.0, 0.20]), 0.02)
+    cfg = FilterConfig()
+    claimed = run_episode(_Scripted(points), _Still(), prior, cfg, steps=2, claims=Claims(tail_scale=4.0))
+    plain = run_episode(_Scripted(points), _Still(), prior, cfg, steps=2)
+    for v, p in zip(claimed.views, plain.views, strict=True):
+        assert v.filter_belief is not None and p.filter_belief is None
+        np.testing.assert_array_equal(v.filter_belief.mean, p.belief.mean)
+        np.testing.assert_allclose(v.belief.cov, 4.0 * v.filter_belief.cov)
+    filter_nees = claimed.final_filter.mahalanobis_sq(truth)
+    assert filter_nees == pytest.approx(plain.final.mahalanobis_sq(truth))
+    assert claimed.final.mahalanobis_sq(truth) == pytest.approx(filter_nees / 4.0)
+    assert plain.final_filter is plain.final

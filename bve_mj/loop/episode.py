@@ -222,7 +222,7 @@ class EpisodeLoop:
         views.append(
             ViewRecord(
                 i, world.p_world_camera, status, feasible, plan_s, measured, accepted, nis, claimed, info,
-                tuple(events),
+                tuple(events), None if claimed is belief else belief,
             )
         )  # fmt: skip
         if not accepted and isinstance(planner, LearnsFromFailedViews):

@@ -176,6 +176,7 @@ class MujocoEpisode:
             "views": views,
             "final_error_mm": self.final_error_mm,
             "final_nees": final.mahalanobis_sq(self.truth),
+            "final_filter_nees": self.result.final_filter.mahalanobis_sq(self.truth),
             **self._final_radius_json(final),
             "state": self._state_json(final),
             "outcome": self.result.outcome,

@@ -22,7 +22,10 @@ class ViewRecord:
     ``iteration`` 0 is the view from the start pose (no plan: status None). ``events``: what
     went wrong and how it was handled (:class:`~bve_mj.loop.events.Event`: ``planner_failed``
     with its reason, ``ik_failed``, ``belief_reset``, ``ambiguous``, and injected faults:
-    ``dropped``, ``false_detection``, ``outlier``, ``ik_failure``).
+    ``dropped``, ``false_detection``, ``outlier``, ``ik_failure``). ``belief`` is what the
+    episode claims; ``filter_belief`` the filter's own, where the claim differs from it
+    (:class:`~bve_mj.loop.claims.Claims`: the fruit's own offset, the innovation, refusal and
+    tail scales), else None.
     """
 
     iteration: int
@@ -36,6 +39,7 @@ class ViewRecord:
     belief: Belief
     world: dict[str, object] | None = None
     events: tuple[Event, ...] = ()
+    filter_belief: Belief | None = None
 
     def has(self, kind: EventKind) -> bool:
         """Whether an event of this kind happened at this view."""
@@ -54,6 +58,14 @@ class EpisodeResult:
     @property
     def final(self) -> Belief:
         return self.views[-1].belief if self.views else self.prior
+
+    @property
+    def final_filter(self) -> Belief:
+        """The filter's own final belief (:attr:`final` where the episode claims no more)."""
+        last = self.views[-1] if self.views else None
+        if last is None:
+            return self.prior
+        return last.belief if last.filter_belief is None else last.filter_belief
 
     def event_counts(self) -> dict[str, int]:
         """How often each kind of event happened, over all views."""
