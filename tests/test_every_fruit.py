@@ -280,3 +280,25 @@ def test_a_visit_path_is_checked_against_every_track_sphere_on_the_way_not_only_
     assert _path_clearance(world, q0, q0, sphere) > 0.0 and _path_clearance(world, q1, q1, sphere) > 0.0
     far = np.array([[*(halfway + [0.0, 0.0, 2.0]), 0.02]])
     assert _path_clearance(world, q0, q1, far) > 1.0
+
+
+def test_a_claimed_track_keeps_its_own_belief_and_the_fruit_match_scores_both():
+    """With claims (a tail scale of 4), the state a track claims holds the track's own belief
+    beside it, and a matched fruit's ``filter_nees`` is 4 times its ``nees``; without claims
+    there is nothing beside the belief and the two are the same."""
+    from bve_mj.estimation.belief import Belief
+    from bve_mj.estimation.tracks import Track
+    from bve_mj.loop.claims import Claims
+    from bve_mj.loop.every_fruit import claimed
+    from bve_mj.loop.mujoco_fruits import FruitMatch
+    from bve_mj.sim.scene_model import Fruit
+
+    centre = np.array([0.45, 0.02, 0.20])
+    track = Track(0, Belief(np.r_[centre + [0.0005, 0.0, -0.0003], 0.03], np.eye(4) * 1e-7), 0, 4, hits=4)
+    fruit = Fruit("f", centre, 0.03, "red")
+    wide = claimed(track, Claims(tail_scale=4.0), stop_sigma_m=0.002, converge_after=3)
+    plain = claimed(track, None, stop_sigma_m=0.002, converge_after=3)
+    assert wide.filter_belief is track.belief and plain.filter_belief is None
+    m = FruitMatch(fruit, wide)
+    assert m.filter_nees == pytest.approx(4.0 * m.nees)
+    assert FruitMatch(fruit, plain).filter_nees == pytest.approx(FruitMatch(fruit, plain).nees)

@@ -54,6 +54,7 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
             {
                 "error_mm": m.error_mm if t is not None else None,
                 "nees": m.nees if t is not None else None,
+                "filter_nees": m.filter_nees if t is not None else None,
                 "localised": bool(t is not None and t.localised),
                 "within": m.localised_within(LOCALISED_MM),
                 "radius_error_mm": None if t is None else 1e3 * (float(t.belief.mean[3]) - m.fruit.radius_m),
@@ -96,6 +97,8 @@ class FruitSuiteResult:
         fruits = [f for r in ok for f in r["fruits"]]
         tracked = [f for f in fruits if f["error_mm"] is not None]
         nees = np.array([f["nees"] for f in tracked]) if tracked else np.array([math.nan])
+        own = [f.get("filter_nees") for f in tracked]
+        filter_nees = np.array([x for x in own if x is not None]) if tracked else np.array([math.nan])
         r_err = np.array([abs(f["radius_error_mm"]) for f in tracked]) if tracked else np.array([math.nan])
         outcomes: dict[str, int] = {}
         for r in rows:
@@ -125,6 +128,7 @@ class FruitSuiteResult:
             "error_mm_median": float(np.median([f["error_mm"] for f in tracked])) if tracked else math.nan,
             "radius_error_mm_median": float(np.median(r_err)),
             "nees_mean": float(np.mean(nees)),
+            "filter_nees_mean": float(np.mean(filter_nees)) if filter_nees.size else math.nan,
             "inside_3sigma_pct": 100.0 * float(np.mean(nees <= 9.0)),
             "silent": int(sum(1 for f in tracked if f["localised"] and f["nees"] > SILENT_NEES)),
             "plan_ms_median": float(np.median(plan)) if plan else math.nan,
@@ -172,13 +176,14 @@ def run_fruit_suite(
 def format_fruit_suite(summaries: dict[str, dict[str, Any]]) -> list[str]:
     """The every-fruit table: scenario | outcomes | ripe fruit | localised % | episodes with
     every one % | no false track % | wrong done | views | error and radius error medians |
-    NEES | in 3σ % | silent | plan, association and tracker ms."""
+    NEES of the claims and of the tracks' own beliefs | in 3σ % | silent | plan, association and
+    tracker ms."""
 
     def num(x: Any, spec: str) -> str:
         return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
 
     cols = ("scenario", "outcomes", "ripe", "loc%", "all%", "nofalse%", "wrong done", "views", "err mm",
-            "r err mm", "NEES", "in3σ%", "silent", "plan ms", "assoc ms", "track ms")  # fmt: skip
+            "r err mm", "NEES", "filter", "in3σ%", "silent", "plan ms", "assoc ms", "track ms")  # fmt: skip
     rows = [
         (
             name,
@@ -192,6 +197,7 @@ def format_fruit_suite(summaries: dict[str, dict[str, Any]]) -> list[str]:
             num(s["error_mm_median"], ".2f"),
             num(s["radius_error_mm_median"], ".2f"),
             num(s["nees_mean"], ".2f"),
+            num(s.get("filter_nees_mean"), ".2f"),
             num(s["inside_3sigma_pct"], ".0f"),
             str(s["silent"]),
             num(s["plan_ms_median"], ".0f"),
@@ -209,6 +215,7 @@ def format_fruit_suite(summaries: dict[str, dict[str, Any]]) -> list[str]:
         "false track (a confirmed track on no fruit); wrong done: episodes that ended converged (every fruit "
         "found) with a ripe fruit of the zone not localised; views: median per episode; err, r err: "
         "median centre and |radius| error of the tracked fruit; NEES: mean over them (3 if honest); "
+        "filter: the same of the tracks' own beliefs, before the claims; "
         "silent: fruit claimed localised with the truth outside the 99.9% ellipsoid; plan: median per"
         " view (every candidate's BVE with the arm); assoc: the association per view (every track's "
         "NIS against every detection and the optimal assignment); track: the tracker's whole step per"

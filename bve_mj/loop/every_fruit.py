@@ -63,6 +63,7 @@ class FruitState:
         belief: the claimed belief over its centre and radius (the filter's with the claims).
         confirmed, hits, misses, expected: see :class:`~bve_mj.estimation.tracks.Track`.
         localised: claimed σmax ≤ the stop threshold after enough detections.
+        filter_belief: the track's own belief where the claim differs from it, else None.
     """
 
     id: int
@@ -72,6 +73,7 @@ class FruitState:
     misses: int
     expected: int
     localised: bool
+    filter_belief: Belief | None = None
 
 
 @dataclass(frozen=True)
@@ -124,7 +126,14 @@ def claimed(track: Track, claims: Claims | None, stop_sigma_m: float, converge_a
         belief = claims.claim(belief, track.innovations, track.missed_share)
     localised = track.confirmed and track.hits >= converge_after and belief.sigma_max_m <= stop_sigma_m
     return FruitState(
-        track.id, belief, track.confirmed, track.hits, track.misses, track.expected, bool(localised)
+        track.id,
+        belief,
+        track.confirmed,
+        track.hits,
+        track.misses,
+        track.expected,
+        bool(localised),
+        None if belief is track.belief else track.belief,
     )
 
 

@@ -90,6 +90,14 @@ class FruitMatch:
     def nees(self) -> float:
         return math.nan if self.track is None else self.track.belief.mahalanobis_sq(self.fruit.centre_m)
 
+    @property
+    def filter_nees(self) -> float:
+        """The NEES of the track's own belief (before the claims; :attr:`nees` where none)."""
+        if self.track is None:
+            return math.nan
+        own = self.track.belief if self.track.filter_belief is None else self.track.filter_belief
+        return own.mahalanobis_sq(self.fruit.centre_m)
+
     def localised_within(self, mm: float) -> bool:
         return self.track is not None and self.track.localised and self.error_mm <= mm
 
