@@ -302,3 +302,22 @@ def test_a_claimed_track_keeps_its_own_belief_and_the_fruit_match_scores_both():
     m = FruitMatch(fruit, wide)
     assert m.filter_nees == pytest.approx(4.0 * m.nees)
     assert FruitMatch(fruit, plain).filter_nees == pytest.approx(FruitMatch(fruit, plain).nees)
+
+
+def test_the_every_fruit_table_reports_the_claimed_radius_nees():
+    """A tracked fruit's radius NEES is ((r̂ - r) / σ_r)² of its claimed belief; the summary
+    averages it over the tracked fruit and the table prints it as ``r NEES``."""
+    from types import SimpleNamespace
+
+    from bve_mj.campaigns.fruit_suite import FruitSuiteResult, _radius_nees, format_fruit_suite
+
+    belief = Belief(np.r_[0.45, 0.0, 0.2, 0.0302], np.diag([1e-8, 1e-8, 1e-8, 1e-8]))  # σ_r 0.1 mm
+    assert _radius_nees(belief, 0.030) == pytest.approx(4.0)
+    assert _radius_nees(Belief(np.array([0.45, 0.0, 0.2]), np.eye(3) * 1e-8), 0.030) is None
+    rows = (_row(0, 5), _row(1, 6))
+    rows[0]["fruits"][0]["radius_nees"], rows[1]["fruits"][0]["radius_nees"] = 4.0, 2.0
+    result = FruitSuiteResult((SimpleNamespace(name="truss", description=""),), {"truss": rows}, 0, 2, 1.0)
+    summary = result.summary("truss")
+    assert summary["radius_nees_mean"] == pytest.approx(3.0)
+    head, _, line, _ = format_fruit_suite({"truss": summary})
+    assert "r NEES" in head and "3.00" in line.split()

@@ -25,6 +25,7 @@ from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario, crashed_rows, run_
 from bve_mj.campaigns.spec import episode_seed
 from bve_mj.config import PlannerKind, Settings, with_overrides
 from bve_mj.errors import BveError, ConfigError
+from bve_mj.estimation.belief import Belief
 
 __all__ = ["FruitSuiteResult", "compare_fruit_planners", "format_fruit_suite", "run_fruit_suite"]
 
@@ -58,6 +59,7 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
                 "localised": bool(t is not None and t.localised),
                 "within": m.localised_within(LOCALISED_MM),
                 "radius_error_mm": None if t is None else 1e3 * (float(t.belief.mean[3]) - m.fruit.radius_m),
+                "radius_nees": None if t is None else _radius_nees(t.belief, m.fruit.radius_m),
             }
         )
     views = ep.result.views
@@ -81,6 +83,12 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
     }
 
 
+def _radius_nees(belief: Belief, radius_m: float) -> float | None:
+    """The claimed radius' NEES, ((r̂ - r) / σ_r)² (None where the belief holds no radius)."""
+    r, sd = belief.radius_m, belief.radius_sigma_m
+    return None if r is None or not sd else ((r - radius_m) / sd) ** 2
+
+
 @dataclass(frozen=True)
 class FruitSuiteResult:
     """Every scenario's every-fruit episode rows (in run order)."""
@@ -100,6 +108,7 @@ class FruitSuiteResult:
         own = [f.get("filter_nees") for f in tracked]
         filter_nees = np.array([x for x in own if x is not None]) if tracked else np.array([math.nan])
         r_err = np.array([abs(f["radius_error_mm"]) for f in tracked]) if tracked else np.array([math.nan])
+        r_nees = np.array([f["radius_nees"] for f in tracked if f.get("radius_nees") is not None])
         outcomes: dict[str, int] = {}
         for r in rows:
             outcomes[str(r["outcome"])] = outcomes.get(str(r["outcome"]), 0) + 1
@@ -129,6 +138,7 @@ class FruitSuiteResult:
             "radius_error_mm_median": float(np.median(r_err)),
             "nees_mean": float(np.mean(nees)),
             "filter_nees_mean": float(np.mean(filter_nees)) if filter_nees.size else math.nan,
+            "radius_nees_mean": float(np.mean(r_nees)) if r_nees.size else math.nan,
             "inside_3sigma_pct": 100.0 * float(np.mean(nees <= 9.0)),
             "silent": int(sum(1 for f in tracked if f["localised"] and f["nees"] > SILENT_NEES)),
             "plan_ms_median": float(np.median(plan)) if plan else math.nan,
@@ -176,14 +186,15 @@ def run_fruit_suite(
 def format_fruit_suite(summaries: dict[str, dict[str, Any]]) -> list[str]:
     """The every-fruit table: scenario | outcomes | ripe fruit | localised % | episodes with
     every one % | no false track % | wrong done | views | error and radius error medians |
-    NEES of the claims and of the tracks' own beliefs | in 3σ % | silent | plan, association and
+    radius NEES | NEES of the claims and of the tracks' own beliefs | in 3σ % | silent | plan, association and
     tracker ms."""
 
     def num(x: Any, spec: str) -> str:
         return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
 
     cols = ("scenario", "outcomes", "ripe", "loc%", "all%", "nofalse%", "wrong done", "views", "err mm",
-            "r err mm", "NEES", "filter", "in3σ%", "silent", "plan ms", "assoc ms", "track ms")  # fmt: skip
+            "r err mm", "r NEES", "NEES", "filter", "in3σ%", "silent", "plan ms", "assoc ms",
+            "track ms")  # fmt: skip
     rows = [
         (
             name,
@@ -196,6 +207,7 @@ def format_fruit_suite(summaries: dict[str, dict[str, Any]]) -> list[str]:
             num(s["views_median"], ".1f"),
             num(s["error_mm_median"], ".2f"),
             num(s["radius_error_mm_median"], ".2f"),
+            num(s.get("radius_nees_mean"), ".2f"),
             num(s["nees_mean"], ".2f"),
             num(s.get("filter_nees_mean"), ".2f"),
             num(s["inside_3sigma_pct"], ".0f"),
@@ -214,7 +226,8 @@ def format_fruit_suite(summaries: dict[str, dict[str, Any]]) -> list[str]:
         f"{LOCALISED_MM:g} mm); all%: episodes with every one localised; nofalse%: episodes with no "
         "false track (a confirmed track on no fruit); wrong done: episodes that ended converged (every fruit "
         "found) with a ripe fruit of the zone not localised; views: median per episode; err, r err: "
-        "median centre and |radius| error of the tracked fruit; NEES: mean over them (3 if honest); "
+        "median centre and |radius| error of the tracked fruit; r NEES: mean radius NEES of the claims "
+        "(1 if honest); NEES: mean over them (3 if honest); "
         "filter: the same of the tracks' own beliefs, before the claims; "
         "silent: fruit claimed localised with the truth outside the 99.9% ellipsoid; plan: median per"
         " view (every candidate's BVE with the arm); assoc: the association per view (every track's "
