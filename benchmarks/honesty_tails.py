@@ -29,31 +29,60 @@ SUCCESS = ("converged", "stable", "approached")
 CHI2_3_MEDIAN = 2.366
 
 
+Row = tuple[float, bool, float | None]  # (claim NEES, success outcome, filter NEES)
+
+
+def _number(x: object) -> float | None:
+    """x as a finite float, None where it is none (missing, null, not finite, not a number)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+        return None
+    return float(x)
+
+
+def _read(path: Path) -> dict[str, list[Row]]:
+    """Per scenario, its episodes' (NEES, success, filter NEES); raises ValueError on a file
+    that is not a suite's JSON."""
+    doc = json.loads(path.read_text())
+    scenarios = doc.get("scenarios") if isinstance(doc, dict) else None
+    if not isinstance(scenarios, dict):
+        raise ValueError("no 'scenarios' object")
+    out: dict[str, list[Row]] = {}
+    for name, s in scenarios.items():
+        runs = s.get("runs") if isinstance(s, dict) else None
+        if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
+            raise ValueError(f"scenario {name!r} has no list of runs")
+        rows = []
+        for r in runs:
+            nees = _number(r.get("nees"))
+            if nees is not None:
+                rows.append((nees, r.get("outcome") in SUCCESS, _number(r.get("filter_nees"))))
+        out[str(name)] = rows
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("suite_json", type=Path, help="a `bve-mj scenarios --json` file")
     args = ap.parse_args()
     try:
-        doc = json.loads(args.suite_json.read_text())
-        scenarios = doc["scenarios"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+        scenarios = _read(args.suite_json)
+    except (OSError, ValueError) as exc:
         ap.error(f"suite_json: {args.suite_json} is not a `bve-mj scenarios --json` file ({exc})")
     print(f"{'scenario':22s} {'n':>3s} {'mean':>7s} {'median':>7s} {'filter':>7s} {'silent':>6s} "
           f"{'k':>6s} {'silent@k':>8s}")  # fmt: skip
     totals = [0, 0, 0]
-    for name, s in scenarios.items():
-        runs = [r for r in s["runs"] if r.get("nees") is not None and math.isfinite(r["nees"])]
-        if not runs:
+    for name, rows in scenarios.items():
+        if not rows:
             continue
-        nees = np.array([r["nees"] for r in runs])
-        success = np.array([r["outcome"] in SUCCESS for r in runs])
-        filt = [r["filter_nees"] for r in runs if r.get("filter_nees") is not None]
+        nees = np.array([r[0] for r in rows])
+        success = np.array([r[1] for r in rows])
+        filt = [r[2] for r in rows if r[2] is not None]
         k = float(np.mean(nees)) / 3.0
         silent = int(np.sum(success & (nees > SILENT_NEES)))
-        silent_k = int(np.sum(success & (nees / k > SILENT_NEES)))
-        totals = [totals[0] + len(runs), totals[1] + silent, totals[2] + silent_k]
+        silent_k = int(np.sum(success & (nees / k > SILENT_NEES))) if k > 0.0 else silent
+        totals = [totals[0] + len(rows), totals[1] + silent, totals[2] + silent_k]
         filt_mean = f"{np.mean(filt):7.2f}" if filt else f"{'-':>7s}"
-        print(f"{name:22s} {len(runs):3d} {np.mean(nees):7.2f} {np.median(nees):7.2f} {filt_mean} "
+        print(f"{name:22s} {len(rows):3d} {np.mean(nees):7.2f} {np.median(nees):7.2f} {filt_mean} "
               f"{silent:6d} {k:6.2f} {silent_k:8d}")  # fmt: skip
     print(f"{'all':22s} {totals[0]:3d} {'':7s} {'':7s} {'':7s} {totals[1]:6d} {'':6s} {totals[2]:8d}")
     print(
