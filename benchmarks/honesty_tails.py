@@ -24,8 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from bve_mj.campaigns.scenarios import SILENT_NEES
+from bve_mj.loop.outcomes import Outcome
 
-SUCCESS = ("converged", "stable", "approached")
+SUCCESS = frozenset(o.value for o in Outcome if o.success)  # a stop rule said done
 CHI2_3_MEDIAN = 2.366
 
 

@@ -309,11 +309,12 @@ def test_the_every_fruit_table_reports_the_claimed_radius_nees():
     averages it over the tracked fruit and the table prints it as ``r NEES``."""
     from types import SimpleNamespace
 
-    from bve_mj.campaigns.fruit_suite import FruitSuiteResult, _radius_nees, format_fruit_suite
+    from bve_mj.campaigns.fruit_suite import FruitSuiteResult, format_fruit_suite
+    from bve_mj.campaigns.runs import radius_metrics
 
     belief = Belief(np.r_[0.45, 0.0, 0.2, 0.0302], np.diag([1e-8, 1e-8, 1e-8, 1e-8]))  # σ_r 0.1 mm
-    assert _radius_nees(belief, 0.030) == pytest.approx(4.0)
-    assert _radius_nees(Belief(np.array([0.45, 0.0, 0.2]), np.eye(3) * 1e-8), 0.030) is None
+    assert radius_metrics(belief, 0.030)["radius_nees"] == pytest.approx(4.0)
+    assert radius_metrics(Belief(np.array([0.45, 0.0, 0.2]), np.eye(3) * 1e-8), 0.030)["radius_nees"] is None
     rows = (_row(0, 5), _row(1, 6))
     rows[0]["fruits"][0]["radius_nees"], rows[1]["fruits"][0]["radius_nees"] = 4.0, 2.0
     result = FruitSuiteResult((SimpleNamespace(name="truss", description=""),), {"truss": rows}, 0, 2, 1.0)

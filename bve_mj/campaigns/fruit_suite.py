@@ -21,6 +21,7 @@ from typing import Any, get_args
 
 import numpy as np
 
+from bve_mj.campaigns.runs import radius_metrics
 from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario, crashed_rows, run_chunk, run_rows
 from bve_mj.campaigns.spec import episode_seed
 from bve_mj.config import PlannerKind, Settings, with_overrides
@@ -58,8 +59,7 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
                 "filter_nees": m.filter_nees if t is not None else None,
                 "localised": bool(t is not None and t.localised),
                 "within": m.localised_within(LOCALISED_MM),
-                "radius_error_mm": None if t is None else 1e3 * (float(t.belief.mean[3]) - m.fruit.radius_m),
-                "radius_nees": None if t is None else _radius_nees(t.belief, m.fruit.radius_m),
+                **_radius_fields(None if t is None else t.belief, m.fruit.radius_m),
             }
         )
     views = ep.result.views
@@ -83,10 +83,13 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
     }
 
 
-def _radius_nees(belief: Belief, radius_m: float) -> float | None:
-    """The claimed radius' NEES, ((r̂ - r) / σ_r)² (None where the belief holds no radius)."""
-    r, sd = belief.radius_m, belief.radius_sigma_m
-    return None if r is None or not sd else ((r - radius_m) / sd) ** 2
+def _radius_fields(belief: Belief | None, radius_m: float) -> dict[str, float | None]:
+    """A tracked fruit's radius error [mm] and NEES (:func:`~bve_mj.campaigns.runs.radius_metrics`
+    of its claimed belief); None for a fruit without a track."""
+    if belief is None:
+        return {"radius_error_mm": None, "radius_nees": None}
+    metrics = radius_metrics(belief, radius_m)
+    return {"radius_error_mm": metrics["radius_error_mm"], "radius_nees": metrics["radius_nees"]}
 
 
 @dataclass(frozen=True)
