@@ -253,21 +253,13 @@ def test_a_cluster_whose_back_fruit_are_never_measured_is_not_called_complete():
 def test_a_visit_path_is_checked_against_every_track_sphere_on_the_way_not_only_at_its_ends():
     """The arm's geoms along the joint-space path: a sphere the wrist sweeps through halfway
     is found though both ends are clear of it; far away it is not."""
-    from types import SimpleNamespace
-
     import mujoco
 
     from bve_mj.loop.harvest import _path_clearance
-    from bve_mj.loop.mujoco import episode_settings
-    from bve_mj.loop.start import start_episode
     from bve_mj.sim.arm import CAMERA_NAME
 
-    start = start_episode(episode_settings(Settings()), 1)
-    m, kin = start.model, start.kin
-    data = mujoco.MjData(m)
-    adr = np.array([m.jnt_qposadr[m.joint(n).id] for n in kin.joint_names])
-    world = SimpleNamespace(model=m, data=data, kin=kin, qpos_adr=adr)
-    q0 = start.q_start
+    world, q0 = _arm_world()
+    m, data, adr = world.model, world.data, world.qpos_adr
     q1 = q0.copy()
     q1[0] += 0.6  # swing the base: the wrist sweeps an arc
     data.qpos[adr] = q0 + 0.5 * (q1 - q0)
@@ -280,6 +272,109 @@ def test_a_visit_path_is_checked_against_every_track_sphere_on_the_way_not_only_
     assert _path_clearance(world, q0, q0, sphere) > 0.0 and _path_clearance(world, q1, q1, sphere) > 0.0
     far = np.array([[*(halfway + [0.0, 0.0, 2.0]), 0.02]])
     assert _path_clearance(world, q0, q1, far) > 1.0
+
+
+def _arm_world(seed: int = 1):  # the arm in its start scene, as _path_clearance reads a world
+    from types import SimpleNamespace
+
+    import mujoco
+
+    from bve_mj.loop.mujoco import episode_settings
+    from bve_mj.loop.start import start_episode
+
+    start = start_episode(episode_settings(Settings()), seed)
+    m, kin = start.model, start.kin
+    data = mujoco.MjData(m)
+    adr = np.array([m.jnt_qposadr[m.joint(n).id] for n in kin.joint_names])
+    return SimpleNamespace(model=m, data=data, kin=kin, qpos_adr=adr), start.q_start
+
+
+def _deepest_x(world, q, hand: bool) -> float:
+    """The farthest x of the hand's geoms (the last joint's link), or of the rest of the arm's."""
+    import mujoco
+
+    from bve_mj.loop.harvest import _arm_geoms, _box_max_x
+
+    world.data.qpos[world.qpos_adr] = q
+    mujoco.mj_kinematics(world.model, world.data)
+    m, names = world.model, world.kin.joint_names
+    ends = set(_arm_geoms(m, names[-1:]))
+    return max(_box_max_x(m, world.data, g) for g in _arm_geoms(m, names) if (g in ends) == hand)
+
+
+def test_the_canopy_keeps_the_arm_in_front_and_lets_only_the_hand_in():
+    """The canopy's front (a plane across the row) is an obstacle: a plane ahead of the arm
+    leaves it clear by the gap; a move that reaches through it is refused; with
+    ``hand=False`` (the approach) the last link (flange and camera) may enter it, the rest
+    of the arm may not; a move that starts behind the plane (the last view's pose) may come
+    out, or stay, but not go deeper."""
+    from bve_mj.loop.harvest import _path_clearance
+
+    world, q0 = _arm_world()
+    none = np.zeros((0, 4))
+    q1 = q0.copy()
+    q1[1] += 0.25  # the shoulder reaches forward: the hand 5 cm or more farther along x
+    hand0, hand1 = _deepest_x(world, q0, True), _deepest_x(world, q1, True)
+    rest1 = _deepest_x(world, q1, False)
+    assert hand1 > hand0 + 0.05 and hand1 > rest1
+    assert _path_clearance(world, q0, q1, none, hand1 + 0.2) == pytest.approx(0.2, abs=0.01)
+    assert _path_clearance(world, q0, q1, none, hand1 - 0.01) == pytest.approx(-0.01, abs=1e-3)
+    between = 0.5 * (max(hand0, rest1) + hand1)  # only the reaching hand crosses it
+    assert _path_clearance(world, q0, q1, none, between) < 0.0
+    assert _path_clearance(world, q0, q1, none, between, hand=False) > 0.0
+    assert _path_clearance(world, q0, q1, none, rest1 - 0.01, hand=False) < 0.0  # the wrist is in too
+    assert _path_clearance(world, q1, q0, none, between) == pytest.approx(0.0, abs=1e-12)  # coming out
+    assert _path_clearance(world, q1, q1, none, between) == pytest.approx(0.0, abs=1e-12)  # not deeper
+    q2 = q1.copy()
+    q2[1] += 0.1  # deeper still
+    assert _path_clearance(world, q1, q2, none, between) < 0.0
+
+
+def test_the_obstacles_are_every_confirmed_track_and_fruit_seen_in_part_and_the_canopy_before_them():
+    """A harvest keeps clear of what it knows: each sphere is a fruit's estimate with its
+    radius plus 3σmax, fruit seen in part included, those known to less than their radius
+    left out (the canopy stands for them), and the canopy's front lies the margin
+    in front of the known fruit's median front; the visited fruit is left out of the
+    spheres its own visit pose is checked against."""
+    from bve_mj.loop.harvest import CANOPY_MARGIN_M, Obstacles
+
+    def state(i: int, centre, radius: float, sigma: float) -> FruitState:
+        b = Belief(np.r_[centre, radius], np.diag([sigma**2] * 3 + [1e-8]))
+        return FruitState(i, b, True, 3, 0, 3, True)
+
+    tracks = [state(0, [0.42, 0.0, 0.2], 0.03, 0.001), state(1, [0.40, 0.05, 0.2], 0.025, 0.002)]
+    part = [state(0, [0.38, -0.05, 0.15], 0.02, 0.006)]
+    known = Obstacles.of(tracks, part)
+    assert known.ids == (0, 1, -1)
+    np.testing.assert_allclose(known.spheres[:, 3], [0.033, 0.031, 0.038], atol=1e-9)
+    assert known.canopy_x_m == pytest.approx(0.375 - CANOPY_MARGIN_M)  # the median front
+    # one fruit ranged far in front of the truss (a false or mis-sized track) does not move it
+    stray = Obstacles.of([*tracks, state(2, [0.25, 0.0, 0.2], 0.02, 0.001)], part)
+    assert stray.canopy_x_m == pytest.approx(0.3675 - CANOPY_MARGIN_M)
+    np.testing.assert_allclose(known.without(0)[:, :3], [[0.40, 0.05, 0.2], [0.38, -0.05, 0.15]])
+    assert Obstacles.of([]).canopy_x_m == np.inf and Obstacles.of([]).spheres.shape == (0, 4)
+    loose = state(3, [0.30, 0.0, 0.2], 0.03, 0.011)  # 3σ 33 mm > its radius: not an obstacle
+    assert Obstacles.of([*tracks, loose]).ids == (0, 1)
+
+
+def test_a_harvest_that_swept_through_an_unseen_truss_now_approaches_from_the_aisle():
+    """`ripe_truss`, the suite's episode 8 of seed 4242: before visits approached along a
+    line and kept out of the canopy, the wrist swept through the truss above (fruit it never
+    saw: no track) on two visits, 17 and 9 mm into them. Every visit now reaches its pose
+    and the arm keeps clear of every true fruit."""
+    from bve_mj.campaigns.scenarios import load_suite
+    from bve_mj.campaigns.spec import episode_seed
+    from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
+
+    (sc,) = load_suite(only=["ripe_truss"])
+    s = with_overrides(
+        sc.settings("camera", None, "centre_radius"), tracking={"fruits": "all"}, episode={"approach": True}
+    )
+    ep = run_every_fruit_episode(s, episode_seed(4242, 8))
+    assert ep.harvest is not None and len(ep.harvest.visits) >= 4
+    for v in ep.harvest.visits:
+        assert v.reached, v.reason
+        assert v.clearance_m > 0.0, f"the arm touched a fruit visiting track {v.track}"
 
 
 def test_a_claimed_track_keeps_its_own_belief_and_the_fruit_match_scores_both():

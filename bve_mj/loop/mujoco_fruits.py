@@ -354,7 +354,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         )  # fmt: skip
         visits = None
         if s.episode.approach and result.final:
-            visits = harvest(world, result.final, s, info, recorder)
+            visits = harvest(world, result.final, s, info, recorder, result.unmeasured)
     finally:
         world.close()
     return FruitsEpisode(result, info, s, seed, zone, visits)
