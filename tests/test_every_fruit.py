@@ -79,6 +79,37 @@ def test_the_view_that_sees_more_open_fruit_wins_and_a_hidden_one_counts_nothing
         planner.plan([_target(0, a, 0.0005, localised=True)], np.zeros(3), 3)
 
 
+def test_a_view_whose_move_is_not_clear_is_left_out_and_with_none_clear_the_planner_fails():
+    """The world's clearance check (``clear``): the better view's move passes through a known
+    fruit, so the other candidate's view is taken; with no clear move the planner raises
+    (the loop then holds the camera), and an exploring view likewise."""
+    from bve_mj.errors import BveError
+
+    a, b = np.array([0.5, 0.0, 0.3]), np.array([0.5, 0.08, 0.3])
+    front, side = np.array([0.2, 0.04, 0.3]), np.array([0.2, -0.12, 0.3])
+
+    def visible(centres, radii, p, R):
+        return np.array([True, np.allclose(p, front)])  # the front view sees both: it is better
+
+    def make_planner(clear):
+        views = iter([_Fixed(side), _Fixed(front), _Fixed(front)])
+        return EveryFruitPlanner(lambda: next(views), lambda f, p, R: 1.0, visible, 2, clear)
+
+    fruits = [_target(0, a, 0.01), _target(1, b, 0.005)]
+    plan, _ = make_planner(lambda plan: True).plan(fruits, np.array([0.2, 0.0, 0.3]), 1)
+    assert np.allclose(plan.p_world_camera, front)
+    planner = make_planner(lambda plan: not np.allclose(plan.p_world_camera, front))
+    plan, planned_for = planner.plan(fruits, np.array([0.2, 0.0, 0.3]), 1)
+    assert np.allclose(plan.p_world_camera, side) and planned_for == 0
+    assert [s.planned_for for s in planner.last_scores] == [0]
+    blocked = make_planner(lambda plan: False)
+    with pytest.raises(BveError, match="passes through a known fruit"):
+        blocked.plan(fruits, np.array([0.2, 0.0, 0.3]), 1)
+    zone = Belief(np.r_[a, 0.03], np.eye(4) * 1e-4)
+    with pytest.raises(BveError, match="exploration view passes through"):
+        blocked.explore(zone, np.array([0.2, 0.0, 0.3]), 2)
+
+
 def _state(i, centre, radius=0.03):
     return FruitState(i, Belief(np.r_[centre, radius], np.eye(4) * 1e-8), True, 3, 0, 3, True)
 
@@ -255,7 +286,7 @@ def test_a_visit_path_is_checked_against_every_track_sphere_on_the_way_not_only_
     is found though both ends are clear of it; far away it is not."""
     import mujoco
 
-    from bve_mj.loop.harvest import _path_clearance
+    from bve_mj.loop.arm_clearance import path_clearance
     from bve_mj.sim.arm import CAMERA_NAME
 
     world, q0 = _arm_world()
@@ -268,13 +299,13 @@ def test_a_visit_path_is_checked_against_every_track_sphere_on_the_way_not_only_
     halfway = data.cam_xpos[m.camera(CAMERA_NAME).id].copy()
     data.qpos[adr] = q0
     sphere = np.array([[*halfway, 0.02]])
-    assert _path_clearance(world, q0, q1, sphere) < 0.0
-    assert _path_clearance(world, q0, q0, sphere) > 0.0 and _path_clearance(world, q1, q1, sphere) > 0.0
+    assert path_clearance(world, q0, q1, sphere) < 0.0
+    assert path_clearance(world, q0, q0, sphere) > 0.0 and path_clearance(world, q1, q1, sphere) > 0.0
     far = np.array([[*(halfway + [0.0, 0.0, 2.0]), 0.02]])
-    assert _path_clearance(world, q0, q1, far) > 1.0
+    assert path_clearance(world, q0, q1, far) > 1.0
 
 
-def _arm_world(seed: int = 1):  # the arm in its start scene, as _path_clearance reads a world
+def _arm_world(seed: int = 1):  # the arm in its start scene, as path_clearance reads a world
     from types import SimpleNamespace
 
     import mujoco
@@ -293,7 +324,7 @@ def _deepest_x(world, q, hand: bool) -> float:
     """The farthest x of the hand's geoms (the last joint's link), or of the rest of the arm's."""
     import mujoco
 
-    from bve_mj.loop.harvest import _arm_geoms, _box_max_x
+    from bve_mj.loop.arm_clearance import _arm_geoms, _box_max_x
 
     world.data.qpos[world.qpos_adr] = q
     mujoco.mj_kinematics(world.model, world.data)
@@ -308,7 +339,7 @@ def test_the_canopy_keeps_the_arm_in_front_and_lets_only_the_hand_in():
     ``hand=False`` (the approach) the last link (flange and camera) may enter it, the rest
     of the arm may not; a move that starts behind the plane (the last view's pose) may come
     out, or stay, but not go deeper."""
-    from bve_mj.loop.harvest import _path_clearance
+    from bve_mj.loop.arm_clearance import path_clearance
 
     world, q0 = _arm_world()
     none = np.zeros((0, 4))
@@ -317,17 +348,17 @@ def test_the_canopy_keeps_the_arm_in_front_and_lets_only_the_hand_in():
     hand0, hand1 = _deepest_x(world, q0, True), _deepest_x(world, q1, True)
     rest1 = _deepest_x(world, q1, False)
     assert hand1 > hand0 + 0.05 and hand1 > rest1
-    assert _path_clearance(world, q0, q1, none, hand1 + 0.2) == pytest.approx(0.2, abs=0.01)
-    assert _path_clearance(world, q0, q1, none, hand1 - 0.01) == pytest.approx(-0.01, abs=1e-3)
+    assert path_clearance(world, q0, q1, none, hand1 + 0.2) == pytest.approx(0.2, abs=0.01)
+    assert path_clearance(world, q0, q1, none, hand1 - 0.01) == pytest.approx(-0.01, abs=1e-3)
     between = 0.5 * (max(hand0, rest1) + hand1)  # only the reaching hand crosses it
-    assert _path_clearance(world, q0, q1, none, between) < 0.0
-    assert _path_clearance(world, q0, q1, none, between, hand=False) > 0.0
-    assert _path_clearance(world, q0, q1, none, rest1 - 0.01, hand=False) < 0.0  # the wrist is in too
-    assert _path_clearance(world, q1, q0, none, between) == pytest.approx(0.0, abs=1e-12)  # coming out
-    assert _path_clearance(world, q1, q1, none, between) == pytest.approx(0.0, abs=1e-12)  # not deeper
+    assert path_clearance(world, q0, q1, none, between) < 0.0
+    assert path_clearance(world, q0, q1, none, between, hand=False) > 0.0
+    assert path_clearance(world, q0, q1, none, rest1 - 0.01, hand=False) < 0.0  # the wrist is in too
+    assert path_clearance(world, q1, q0, none, between) == pytest.approx(0.0, abs=1e-12)  # coming out
+    assert path_clearance(world, q1, q1, none, between) == pytest.approx(0.0, abs=1e-12)  # not deeper
     q2 = q1.copy()
     q2[1] += 0.1  # deeper still
-    assert _path_clearance(world, q1, q2, none, between) < 0.0
+    assert path_clearance(world, q1, q2, none, between) < 0.0
 
 
 def test_the_obstacles_are_every_confirmed_track_and_fruit_seen_in_part_and_the_canopy_before_them():
@@ -336,7 +367,7 @@ def test_the_obstacles_are_every_confirmed_track_and_fruit_seen_in_part_and_the_
     left out (the canopy stands for them), and the canopy's front lies the margin
     in front of the known fruit's median front; the visited fruit is left out of the
     spheres its own visit pose is checked against."""
-    from bve_mj.loop.harvest import CANOPY_MARGIN_M, Obstacles
+    from bve_mj.loop.arm_clearance import CANOPY_MARGIN_M, Obstacles
 
     def state(i: int, centre, radius: float, sigma: float) -> FruitState:
         b = Belief(np.r_[centre, radius], np.diag([sigma**2] * 3 + [1e-8]))
@@ -375,6 +406,35 @@ def test_a_harvest_that_swept_through_an_unseen_truss_now_approaches_from_the_ai
     for v in ep.harvest.visits:
         assert v.reached, v.reason
         assert v.clearance_m > 0.0, f"the arm touched a fruit visiting track {v.track}"
+
+
+def test_the_views_keep_the_arm_off_the_fruit_the_robot_knows():
+    """`cherry_truss`, the suite's episode 0 of seed 9494: a false track ranged 30 cm behind
+    the row drew the views towards it (`restoring`), end link and wrist 5-20 mm into six
+    cherries of the truss. Each view's move is now checked against the fruit tracked and
+    seen in part and the canopy: the arm keeps clear of every true fruit."""
+    from bve_mj.campaigns.scenarios import load_suite
+    from bve_mj.campaigns.spec import episode_seed
+    from bve_mj.loop.arm_clearance import FruitClearance
+    from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
+
+    class Clearance:  # an episode recorder that only measures
+        def attach(self, world, ripe, zone_centre_m):
+            self.clearance = FruitClearance(world, world.info)
+
+        def on_step(self, sim_time):
+            self.clearance.step(sim_time)
+
+        def on_view(self, view):
+            pass
+
+    (sc,) = load_suite(only=["cherry_truss"])
+    s = with_overrides(sc.settings("camera", None, "centre_radius"), tracking={"fruits": "all"})
+    recorder = Clearance()
+    ep = run_every_fruit_episode(s, episode_seed(9494, 0), recorder)
+    assert len(ep.result.views) >= 8
+    least = recorder.clearance.least_m
+    assert least > 0.0, f"the arm reached {-1e3 * least:.1f} mm into a fruit"
 
 
 def test_a_claimed_track_keeps_its_own_belief_and_the_fruit_match_scores_both():

@@ -29,6 +29,7 @@ from bve_mj.estimation.tracks import Tracker
 from bve_mj.estimation.unmeasured import tracking_config
 from bve_mj.estimation.view_correlation import new_view_share
 from bve_mj.estimation.visibility import visible_arc_deg
+from bve_mj.loop.arm_clearance import PATH_CLEARANCE_M, Obstacles, path_clearance
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.every_fruit import FruitsResult, FruitState, FruitsView, run_every_fruit
 from bve_mj.loop.harvest import HarvestResult, RecordsHarvest, harvest
@@ -42,6 +43,7 @@ from bve_mj.planning.every_fruit import (
     PlansForEveryFruit,
     information_gain,
 )
+from bve_mj.planning.plan import ViewPlan
 from bve_mj.planning.zone_coverage import ZoneCoverage
 from bve_mj.robot import make_arm_planner
 from bve_mj.sim.mujoco_world import MujocoWorld
@@ -325,14 +327,23 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     radius_prior = (fruit.radius_m, max(fruit.radius_m * fruit.radius_spread_rel / math.sqrt(3.0), 1e-5))
     sd = s.tracking.zone_m / 2.0
     zone_belief = Belief(np.r_[zone, radius_prior[0]], np.diag([sd**2] * 3 + [radius_prior[1] ** 2]))
-    planner: PlansForEveryFruit
-    if s.planner.kind == "bve":
-        planner = EveryFruitPlanner(make, gain, visible_from, s.tracking.candidates)
-    else:  # a baseline: one pattern for the whole zone
-        planner = PatternPlanner(make(), zone_belief)
     update = filter_update(s.filter.kind, s.filter.ekf_iterations)
     tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr)
     seen_in_part = Tracker(tracking_config(s.tracking), zone, radius_prior, update, visible)
+
+    def clear(plan: ViewPlan) -> bool:  # the move keeps the arm off the fruit known now
+        if plan.q is None:
+            return True
+        known = Obstacles.of(
+            [t for t in tracker.tracks if t.confirmed], [h for h in seen_in_part.tracks if h.confirmed]
+        )
+        return path_clearance(world, world.q, plan.q, known.spheres, known.canopy_x_m) >= PATH_CLEARANCE_M
+
+    planner: PlansForEveryFruit
+    if s.planner.kind == "bve":
+        planner = EveryFruitPlanner(make, gain, visible_from, s.tracking.candidates, clear)
+    else:  # a baseline: one pattern for the whole zone
+        planner = PatternPlanner(make(), zone_belief)
     claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF)
     coverage = None
     if s.tracking.zone_framed_share > 0.0:

@@ -131,12 +131,17 @@ class EveryFruitPlanner:
         visible: ``visible(centres (n, 3), radii (n,), p_world_camera, R_world_camera)`` →
             (n,) bool: the fruit the view would see.
         candidates: how many of the least localised fruit get a planned viewpoint.
+        clear: ``clear(plan)``: whether the move to a planned view keeps the arm clear of what
+            the robot knows (the world's check, :func:`bve_mj.loop.arm_clearance.path_clearance`);
+            a candidate whose move is not clear is left out as one whose planner failed, an
+            exploring view likewise. None: not checked.
     """
 
     make: Callable[[], Planner]
     gain: Callable[[FruitTarget, np.ndarray, np.ndarray], float]
     visible: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
     candidates: int = 2
+    clear: Callable[[ViewPlan], bool] | None = None
     _planners: dict[int, Planner] = field(default_factory=dict)
     last_scores: tuple[CandidateScore, ...] = ()
 
@@ -181,6 +186,8 @@ class EveryFruitPlanner:
         plan = planner.plan(zone, p_world_camera, iteration)
         if not (np.all(np.isfinite(plan.p_world_camera)) and np.all(np.isfinite(plan.p_world_target))):
             raise BveError("the exploration view is not finite")
+        if self.clear is not None and not self.clear(plan):
+            raise BveError("the move to the exploration view passes through a known fruit or the canopy")
         if q is not None:
             self.set_configuration(q)
         return plan
@@ -226,6 +233,9 @@ class EveryFruitPlanner:
                 continue
             if not (np.all(np.isfinite(plan.p_world_camera)) and np.all(np.isfinite(plan.p_world_target))):
                 failures.append(f"fruit {target.id}: non-finite viewpoint")
+                continue
+            if self.clear is not None and not self.clear(plan):
+                failures.append(f"fruit {target.id}: the move passes through a known fruit or the canopy")
                 continue
             R = camera_rotation(plan.p_world_camera, plan.p_world_target)
             sees = np.asarray(self.visible(centres, radii, plan.p_world_camera, R), dtype=bool)

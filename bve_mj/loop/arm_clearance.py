@@ -1,0 +1,213 @@
+"""What the arm keeps clear of, and how close it came (the harvest, and the every-fruit views).
+
+**What the robot knows** (:class:`Obstacles`), never the scene's truth:
+
+- every confirmed track and every fruit seen in part known to within its radius (a sphere:
+  estimated centre, radius plus three σmax); tentative tracks, seen once or twice, and
+  looser estimates are not obstacles (a false detection's sphere, or one ranged from a
+  sliver of outline, would only block moves; the canopy stands for them);
+- **the canopy**: trusses hang from the stems on the row's aisle side, so every fruit of the
+  row, seen or not (green fruit, other trusses), hangs behind a plane across the row's normal
+  (the world's +x: the robot faces the row). Its front is the median front of the known
+  fruit, less ``CANOPY_MARGIN_M``. The fruit the detector never measured (green ones, other
+  trusses) hang there too, so an arm that stays in front of it touches none of them.
+
+:func:`path_clearance` measures a joint-space move (the controller's straight path, sampled)
+against them, each arm geom taken as its box. :class:`FruitClearance` measures, in physics,
+the least distance between the arm's geoms and every true fruit (MuJoCo's
+``mj_geomDistance``): a move touches a fruit when it falls to zero.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import mujoco
+import numpy as np
+
+from bve_mj.estimation.belief import Belief
+from bve_mj.sim.mujoco_world import MujocoWorld
+from bve_mj.sim.scene_model import SceneInfo, fruit_geom_name
+
+__all__ = [
+    "CANOPY_MARGIN_M",
+    "PATH_CLEARANCE_M",
+    "FruitClearance",
+    "KnownFruit",
+    "Obstacles",
+    "deepest_x",
+    "path_clearance",
+]
+
+PATH_CLEARANCE_M = 0.0
+"""The arm's geoms keep at least this from every known fruit's sphere and the canopy's front
+along a move [m]."""
+
+CANOPY_MARGIN_M = 0.03
+"""The canopy's front lies this far in front of the known fruit's median front [m] (a round
+tomato's radius): the trusses of one row hang at depths a few centimetres apart."""
+
+_PATH_SAMPLES = 16  # configurations checked along a joint-space move
+_CHECK_EVERY = 10  # physics steps between clearance checks
+
+
+class KnownFruit(Protocol):
+    """A fruit the robot knows of: a track or a fruit seen in part (its id and belief over
+    centre and radius)."""
+
+    @property
+    def id(self) -> int: ...
+
+    @property
+    def belief(self) -> Belief: ...
+
+
+@dataclass(frozen=True)
+class Obstacles:
+    """What the arm keeps clear of (module docstring).
+
+    Attributes:
+        ids: the track (or fruit seen in part, negative: ``-1 - id``) of each sphere.
+        spheres: (n, 4): centre [m] and radius plus three σmax [m].
+        canopy_x_m: the canopy's front along the row's normal (world x) [m]: the median of
+            the known fruit's fronts less ``CANOPY_MARGIN_M`` (the median: one track ranged
+            wrong, a cherry taken for a nearer larger fruit, does not move it); inf with no
+            fruit known.
+    """
+
+    ids: tuple[int, ...]
+    spheres: np.ndarray
+    canopy_x_m: float
+
+    @classmethod
+    def of(cls, tracks: Sequence[KnownFruit], seen_in_part: Sequence[KnownFruit] = ()) -> Obstacles:
+        """Spheres of the ``tracks`` and of the fruit ``seen_in_part`` known to within their
+        radius (3σmax ≤ the estimated radius; a looser one, ranged from a sliver of outline,
+        says little where the fruit is and would block every approach near it: the canopy
+        stands for it); the canopy's front from the same fruit."""
+        kept = [(f, f.id) for f in tracks] + [(f, -1 - f.id) for f in seen_in_part]
+        kept = [(f, i) for f, i in kept if 3.0 * f.belief.sigma_max_m <= float(f.belief.mean[3])]
+        spheres = np.array(
+            [[*f.belief.centre_m, float(f.belief.mean[3]) + 3.0 * f.belief.sigma_max_m] for f, _ in kept]
+        ).reshape(-1, 4)
+        fronts = [float(f.belief.centre_m[0] - f.belief.mean[3]) for f, _ in kept]
+        front = float(np.median(fronts)) - CANOPY_MARGIN_M if fronts else math.inf
+        return cls(tuple(i for _, i in kept), spheres, front)
+
+    def without(self, track: int) -> np.ndarray:
+        """The spheres of every obstacle but the track ``track`` (the fruit visited), (m, 4)."""
+        return self.spheres[[i != track for i in self.ids]].reshape(-1, 4)
+
+
+def deepest_x(world: MujocoWorld, q: np.ndarray) -> float:
+    """The farthest x any of the arm's geoms (its box) reaches at q [m]."""
+    m = world.model
+    data = mujoco.MjData(m)
+    data.qpos[:] = world.data.qpos
+    data.qpos[world.qpos_adr] = q
+    mujoco.mj_kinematics(m, data)
+    return max(_box_max_x(m, data, g) for g in _arm_geoms(m, world.kin.joint_names))
+
+
+def _box_half(m: mujoco.MjModel, g: int) -> np.ndarray:
+    """A geom's half sizes as a box (a cylinder as the box around it)."""
+    half = m.geom_size[g]
+    if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CYLINDER:
+        return np.array([half[0], half[0], half[1]])
+    return np.asarray(half)
+
+
+def _box_max_x(m: mujoco.MjModel, data: mujoco.MjData, g: int) -> float:
+    """The farthest x of a geom's box [m]."""
+    return float(data.geom_xpos[g][0] + np.abs(data.geom_xmat[g].reshape(3, 3)[0]) @ _box_half(m, g))
+
+
+def path_clearance(
+    world: MujocoWorld,
+    q_from: np.ndarray,
+    q_to: np.ndarray,
+    spheres: np.ndarray,
+    canopy_x_m: float = math.inf,
+    hand: bool = True,
+) -> float:
+    """The least distance between the arm's geoms and the ``spheres`` (n, 4: centre, radius)
+    or the canopy's front over the straight joint-space path ``q_from`` → ``q_to`` (sampled),
+    each arm geom taken as its box (a cylinder as the box around it) [m]; negative: inside.
+
+    The canopy's front is the plane x = ``canopy_x_m``; ``hand`` False: the last joint's link
+    (flange and camera) may enter it (the approach). A move that starts inside (the last
+    view's pose may be) is measured against its way out: a geom inside a sphere or behind
+    the canopy's front at ``q_from`` may not go deeper than it starts."""
+    if len(spheres) == 0 and not math.isfinite(canopy_x_m):
+        return math.inf
+    m = world.model
+    data = mujoco.MjData(m)
+    data.qpos[:] = world.data.qpos
+    arm = np.array(_arm_geoms(m, world.kin.joint_names))
+    half = np.array([_box_half(m, g) for g in arm])  # (k, 3)
+    hand_geoms = set(_arm_geoms(m, world.kin.joint_names[-1:]))
+    in_canopy = np.array([hand or g not in hand_geoms for g in arm.tolist()])
+    inside = None  # each geom's depth into each sphere at q_from (≤ 0), (k, n)
+    behind = None  # each geom's depth behind the canopy's front at q_from (≥ 0), (k,)
+    least = math.inf
+    for s in np.linspace(0.0, 1.0, _PATH_SAMPLES):
+        data.qpos[world.qpos_adr] = q_from + s * (np.asarray(q_to) - q_from)
+        mujoco.mj_kinematics(m, data)
+        pos, R = data.geom_xpos[arm], data.geom_xmat[arm].reshape(-1, 3, 3)
+        if len(spheres):
+            # the spheres' centres in each geom's frame, (k, n, 3); the gap to each box
+            local = np.einsum("knj,kji->kni", spheres[None, :, :3] - pos[:, None, :], R)
+            outside = local - np.clip(local, -half[:, None, :], half[:, None, :])
+            gap = np.linalg.norm(outside, axis=2) - spheres[None, :, 3]
+            inside = np.minimum(gap, 0.0) if inside is None else inside
+            least = min(least, float(np.min(gap - inside)))
+        if math.isfinite(canopy_x_m) and in_canopy.any():
+            gap_x = canopy_x_m - (pos[:, 0] + np.einsum("ki,ki->k", np.abs(R[:, 0, :]), half))  # farthest x
+            behind = np.maximum(-gap_x, 0.0) if behind is None else behind
+            least = min(least, float(np.min((gap_x + behind)[in_canopy])))
+    return least
+
+
+def _arm_geoms(m: mujoco.MjModel, joint_names: Sequence[str]) -> list[int]:
+    """Every geom of the arm's bodies and their descendants."""
+    arm_bodies = {m.jnt_bodyid[m.joint(n).id] for n in joint_names}
+    return [g for g in range(m.ngeom) if _root_in(m, int(m.geom_bodyid[g]), arm_bodies)]
+
+
+class FruitClearance:
+    """The least distance between the arm's geoms and every true fruit's geom [m] (at most
+    0.05 m is measured), measured every few physics steps of a move (call :meth:`step` from
+    the world's step hook)."""
+
+    def __init__(self, world: MujocoWorld, info: SceneInfo) -> None:
+        m = world.model
+        self.world = world
+        self.fruit = [
+            mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, fruit_geom_name(f.name)) for f in info.fruits
+        ]
+        self.fruit = [g for g in self.fruit if g >= 0]
+        self.arm = _arm_geoms(m, world.kin.joint_names)
+        self.least_m = math.inf
+        self._n = 0
+
+    def step(self, sim_time: float, force: bool = False) -> None:
+        self._n += 1
+        if not force and self._n % _CHECK_EVERY:
+            return
+        m, d = self.world.model, self.world.data
+        for a in self.arm:
+            for f in self.fruit:
+                dist = mujoco.mj_geomDistance(m, d, a, f, 0.05, None)
+                self.least_m = min(self.least_m, float(dist))
+
+
+def _root_in(m: mujoco.MjModel, body: int, arm: set[int]) -> bool:
+    """Whether ``body`` is an arm body or a descendant of one."""
+    while body > 0:
+        if body in arm:
+            return True
+        body = int(m.body_parentid[body])
+    return False
