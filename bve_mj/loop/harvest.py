@@ -58,7 +58,7 @@ from bve_mj.sim.scene_model import SceneInfo
 __all__ = ["CLEARANCE_M", "RETREAT_M", "HarvestResult", "RecordsHarvest", "Visit", "harvest", "harvest_order"]
 
 CLEARANCE_M = 0.03
-"""The camera keeps at least this from every other fruit's surface at a visit's pose [m]."""
+"""The camera keeps at least this from every other known fruit's sphere at a visit's pose [m]."""
 
 RETREAT_M = 0.1
 """The pre-approach pose: the camera this much farther from the fruit than the visit pose,
