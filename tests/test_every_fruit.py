@@ -361,6 +361,60 @@ def test_the_canopy_keeps_the_arm_in_front_and_lets_only_the_hand_in():
     assert path_clearance(world, q1, q2, none, between) < 0.0
 
 
+def test_a_one_target_move_into_the_fruit_it_localises_is_refused_and_the_loop_holds():
+    """The one-target loop's planner (:class:`ClearMovesPlanner`): a plan whose move brings
+    the hand into the fruit the belief localises raises (the loop then holds the camera);
+    the same move with the fruit 10 cm beyond the hand passes; a fruit known only loosely
+    (σ 5 cm) is no obstacle while searching, but in approach mode the canopy stands 3σ
+    nearer from the start (where its untracked neighbours may hang) and only the hand may
+    enter it; a plan without joint angles passes unchecked; what the loop tells the planner
+    reaches the one inside."""
+    import mujoco
+
+    from bve_mj.errors import PlanningError
+    from bve_mj.loop.arm_clearance import ClearMovesPlanner
+    from bve_mj.sim.arm import CAMERA_NAME
+
+    world, q0 = _arm_world()
+    world.q = q0
+    q1 = q0.copy()
+    q1[1] += 0.25  # the hand reaches 5 cm or more farther along x
+    hand1 = _deepest_x(world, q1, True)
+    world.data.qpos[world.qpos_adr] = q1
+    mujoco.mj_kinematics(world.model, world.data)
+    mujoco.mj_camlight(world.model, world.data)
+    reached = world.data.cam_xpos[world.model.camera(CAMERA_NAME).id].copy()  # the camera at q1
+
+    class Inner:
+        q = None
+
+        def __init__(self, q=q1):
+            self.plan_q = q
+
+        def plan(self, belief, p_world_camera, iteration):
+            return ViewPlan(reached, belief.centre_m, "optimal", True, 0.0, q=self.plan_q)
+
+        def set_configuration(self, q):
+            self.q = q
+
+    def fruit_at(dx, sigma=0.001):
+        centre = np.array([hand1 + dx, reached[1], reached[2]])
+        return Belief(np.r_[centre, 0.03], np.diag([sigma**2] * 3 + [1e-6]))
+
+    planner = ClearMovesPlanner(Inner(), world, 0.03)
+    with pytest.raises(PlanningError, match="into the fruit or the canopy"):
+        planner.plan(fruit_at(0.02), np.zeros(3), 3)
+    assert planner.plan(fruit_at(0.1), np.zeros(3), 3).q is q1
+    assert planner.plan(fruit_at(0.1, sigma=0.05), np.zeros(3), 3).q is q1
+    approach = ClearMovesPlanner(Inner(), world, 0.03, approach=True)
+    assert approach.plan(fruit_at(0.1), np.zeros(3), 3).q is q1
+    with pytest.raises(PlanningError):  # the canopy 21 cm nearer: the wrist in it too
+        approach.plan(fruit_at(0.1, sigma=0.05), np.zeros(3), 3)
+    assert ClearMovesPlanner(Inner(None), world, 0.03).plan(fruit_at(0.02), np.zeros(3), 3).q is None
+    planner.set_configuration(q0)
+    assert planner.planner.q is q0
+
+
 def test_the_obstacles_are_every_confirmed_track_and_fruit_seen_in_part_and_the_canopy_before_them():
     """A harvest keeps clear of what it knows: each sphere is a fruit's estimate with its
     radius plus 3σmax, fruit seen in part included, those known to less than their radius

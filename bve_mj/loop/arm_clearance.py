@@ -28,13 +28,16 @@ from typing import Protocol
 import mujoco
 import numpy as np
 
+from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
+from bve_mj.planning.plan import Planner, PlannerAround, ViewPlan
 from bve_mj.sim.mujoco_world import MujocoWorld
 from bve_mj.sim.scene_model import SceneInfo, fruit_geom_name
 
 __all__ = [
     "CANOPY_MARGIN_M",
     "PATH_CLEARANCE_M",
+    "ClearMovesPlanner",
     "FruitClearance",
     "KnownFruit",
     "Obstacles",
@@ -83,19 +86,25 @@ class Obstacles:
     canopy_x_m: float
 
     @classmethod
-    def of(cls, tracks: Sequence[KnownFruit], seen_in_part: Sequence[KnownFruit] = ()) -> Obstacles:
+    def of(
+        cls, tracks: Sequence[KnownFruit], seen_in_part: Sequence[KnownFruit] = (), radius_m: float = 0.0
+    ) -> Obstacles:
         """Spheres of the ``tracks`` and of the fruit ``seen_in_part`` known to within their
         radius (3σmax ≤ the estimated radius; a looser one, ranged from a sliver of outline,
         says little where the fruit is and would block every approach near it: the canopy
-        stands for it); the canopy's front from the same fruit."""
-        kept = [(f, f.id) for f in tracks] + [(f, -1 - f.id) for f in seen_in_part]
-        kept = [(f, i) for f, i in kept if 3.0 * f.belief.sigma_max_m <= float(f.belief.mean[3])]
-        spheres = np.array(
-            [[*f.belief.centre_m, float(f.belief.mean[3]) + 3.0 * f.belief.sigma_max_m] for f, _ in kept]
-        ).reshape(-1, 4)
-        fronts = [float(f.belief.centre_m[0] - f.belief.mean[3]) for f, _ in kept]
+        stands for it); the canopy's front from the same fruit. ``radius_m``: the radius of a
+        belief without one (the paper's centre-only state)."""
+        every = [(f, f.id) for f in tracks] + [(f, -1 - f.id) for f in seen_in_part]
+        kept = [
+            (f.belief.centre_m, r, f.belief.sigma_max_m, i)
+            for f, i in every
+            for r in [radius_m if f.belief.radius_m is None else f.belief.radius_m]
+            if 3.0 * f.belief.sigma_max_m <= r
+        ]
+        spheres = np.array([[*c, r + 3.0 * sigma] for c, r, sigma, _ in kept]).reshape(-1, 4)
+        fronts = [float(c[0] - r) for c, r, _, _ in kept]
         front = float(np.median(fronts)) - CANOPY_MARGIN_M if fronts else math.inf
-        return cls(tuple(i for _, i in kept), spheres, front)
+        return cls(tuple(i for *_, i in kept), spheres, front)
 
     def without(self, track: int) -> np.ndarray:
         """The spheres of every obstacle but the track ``track`` (the fruit visited), (m, 4)."""
@@ -211,3 +220,47 @@ def _root_in(m: mujoco.MjModel, body: int, arm: set[int]) -> bool:
             return True
         body = int(m.body_parentid[body])
     return False
+
+
+@dataclass(frozen=True)
+class _Target:
+    id: int
+    belief: Belief
+
+
+class ClearMovesPlanner(PlannerAround):
+    """``planner`` in the one-target loop, whose moves keep the arm clear of the fruit it
+    localises (its sphere once it is known to within its radius, :class:`Obstacles`; a fruit
+    of ``radius_m`` where the state holds no radius) and of the canopy in front of it (the
+    loop tracks no other fruit: its neighbours hang there). Searching, from the band
+    distance, the canopy's front is the fruit's once it is known to within its radius (as
+    the every-fruit views take it); in ``approach`` mode, where the arm goes in to the fruit,
+    it is the fruit's front less three σmax and ``CANOPY_MARGIN_M`` from the first view
+    (known or loose), and the hand (flange and camera) may enter it, as a harvest's approach
+    does, the rest of the arm not. A plan whose move is not clear raises
+    :class:`~bve_mj.errors.PlanningError`, and the loop holds the camera (event
+    ``planner_failed``). A plan without joint angles is passed on unchecked."""
+
+    def __init__(self, planner: Planner, world: MujocoWorld, radius_m: float, approach: bool = False) -> None:
+        super().__init__(planner)
+        self.world = world
+        self.radius_m = radius_m
+        self.approach = approach
+
+    def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        plan = self.planner.plan(belief, p_world_camera, iteration)
+        if plan.q is None:
+            return plan
+        known = Obstacles.of([_Target(0, belief)], radius_m=self.radius_m)
+        canopy = known.canopy_x_m
+        if self.approach:  # the canopy in front of the fruit's front wherever it may be (3σ
+            # nearer), even while it is known too loosely to be an obstacle itself
+            r = self.radius_m if belief.radius_m is None else belief.radius_m
+            canopy = float(belief.centre_m[0]) - r - 3.0 * belief.sigma_max_m - CANOPY_MARGIN_M
+        q_now, hand = self.world.q, not self.approach
+        clear = path_clearance(self.world, q_now, plan.q, known.spheres, canopy, hand=hand)
+        if clear < PATH_CLEARANCE_M:
+            raise PlanningError(
+                f"view {iteration}: the move passes {-1e3 * clear:.0f} mm into the fruit or the canopy"
+            )
+        return plan

@@ -17,13 +17,7 @@ import numpy as np
 from bve_mj.config import FaultConfig
 from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
-from bve_mj.planning.plan import (
-    LearnsFromFailedViews,
-    LearnsFromFusedViews,
-    Planner,
-    SyncsToEncoders,
-    ViewPlan,
-)
+from bve_mj.planning.plan import Planner, PlannerAround, ViewPlan
 from bve_mj.sim.world import (
     HoldsOnFailedMove,
     Observation,
@@ -103,11 +97,11 @@ class FaultyWorld:
         return self.world.p_world_fruit
 
 
-class FaultyPlanner:
+class FaultyPlanner(PlannerAround):
     """``planner`` whose optimiser fails (raises :class:`PlanningError`) with probability ``p``."""
 
     def __init__(self, planner: Planner, p: float, rng: np.random.Generator) -> None:
-        self.planner = planner
+        super().__init__(planner)
         self.p = p
         self._rng = rng
 
@@ -115,17 +109,3 @@ class FaultyPlanner:
         if self._rng.random() < self.p:
             raise PlanningError(f"injected optimiser failure at view {iteration}")
         return self.planner.plan(belief, p_world_camera, iteration)
-
-    def set_configuration(self, q: np.ndarray) -> None:
-        if isinstance(self.planner, SyncsToEncoders):
-            self.planner.set_configuration(q)
-
-    def note_failed_view(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
-        if isinstance(self.planner, LearnsFromFailedViews):
-            self.planner.note_failed_view(p_world_camera, p_world_target)
-
-    def note_fused_view(
-        self, p_world_camera: np.ndarray, p_world_target: np.ndarray, *, restart: bool = False
-    ) -> None:
-        if isinstance(self.planner, LearnsFromFusedViews):
-            self.planner.note_fused_view(p_world_camera, p_world_target, restart=restart)

@@ -20,6 +20,7 @@ from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.noise import INNOVATION_PRIOR_DOF
 from bve_mj.estimation.view_correlation import ViewCorrelation
+from bve_mj.loop.arm_clearance import ClearMovesPlanner
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.episode import EpisodeResult, StopRules, ViewRecord, run_episode
 from bve_mj.loop.faults import FaultyPlanner, FaultyWorld
@@ -318,8 +319,11 @@ def episode_parts(
         recorder.attach(world, prior)
     names = episode_constraints(s)
     experiment = EXPERIMENTS[ep.experiment.upper()]
-    planner: Planner = make_arm_planner(
-        s, experiment.loss, names, kin, q_start, np.random.default_rng(start.planner_ss)
+    planner: Planner = ClearMovesPlanner(
+        make_arm_planner(s, experiment.loss, names, kin, q_start, np.random.default_rng(start.planner_ss)),
+        world,
+        s.fruit.radius_m,
+        ep.approach,
     )
     loop_world: World = world
     if s.faults.any:

@@ -14,6 +14,7 @@ __all__ = [
     "LearnsFromFusedViews",
     "PlanStatus",
     "Planner",
+    "PlannerAround",
     "SyncsToEncoders",
     "ViewPlan",
 ]
@@ -99,3 +100,29 @@ class SyncsToEncoders(Protocol):
     def set_configuration(self, q: np.ndarray) -> None:
         """Plan the next move from ``q`` [rad]."""
         ...
+
+
+class PlannerAround:
+    """A planner around ``planner``: it plans with it and passes on what the loop tells it
+    (the encoders' joint angles, the views that failed and were fused) where ``planner``
+    takes them. Subclasses change :meth:`plan` (injected faults, a clearance check)."""
+
+    def __init__(self, planner: Planner) -> None:
+        self.planner = planner
+
+    def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        return self.planner.plan(belief, p_world_camera, iteration)
+
+    def set_configuration(self, q: np.ndarray) -> None:
+        if isinstance(self.planner, SyncsToEncoders):
+            self.planner.set_configuration(q)
+
+    def note_failed_view(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        if isinstance(self.planner, LearnsFromFailedViews):
+            self.planner.note_failed_view(p_world_camera, p_world_target)
+
+    def note_fused_view(
+        self, p_world_camera: np.ndarray, p_world_target: np.ndarray, *, restart: bool = False
+    ) -> None:
+        if isinstance(self.planner, LearnsFromFusedViews):
+            self.planner.note_fused_view(p_world_camera, p_world_target, restart=restart)
