@@ -1,4 +1,5 @@
-"""What the arm keeps clear of, and how close it came (the harvest, and the every-fruit views).
+"""What the arm keeps clear of, and how close it came: the harvest's visits, the every-fruit
+views and the one-target loop's moves (:class:`ClearMovesPlanner`).
 
 **What the robot knows** (:class:`Obstacles`), never the scene's truth:
 
