@@ -59,6 +59,49 @@ def test_camera_jacobian_matches_finite_differences(arm):
             np.testing.assert_allclose(dR[..., 0], skew_w @ R, atol=1e-6)
 
 
+def test_batched_camera_poses_match_pinocchio(arm):
+    kin, _ = arm
+    rng = np.random.default_rng(3)
+    Q = np.array([kin.random_configuration(rng) for _ in range(50)])
+    P, R, J = kin.camera_poses_and_jacobians(Q)
+    assert kin._chain is not None  # the NumPy path, not the one-at-a-time fallback
+    for i, q in enumerate(Q):
+        p, r, j = kin.camera_pose_and_jacobian(q)
+        np.testing.assert_allclose(P[i], p, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(R[i], r, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(J[i], j, rtol=0, atol=1e-12)
+    other = ArmKinematics(kin.robot, kin.limit_set)
+    other._chain = None  # an arm the NumPy path does not cover: one Pinocchio call each
+    for a, b in zip(other.camera_poses_and_jacobians(Q[:5]), (P[:5], R[:5], J[:5]), strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
+def test_look_at_residuals_tell_which_starts_solve(arm):
+    """The batched solve ends where each single start of the look-at IK ends: the same
+    verdict for every start, residuals alike."""
+    from bve_mj.robot.ik import IkOptions, _solve_from, look_at_residuals
+
+    kin, _ = arm
+    rng = np.random.default_rng(4)
+    n = 60
+    starts = np.array([kin.random_configuration(rng) for _ in range(n)])
+    cameras, directions = [], []
+    for _ in range(n):
+        p, R = kin.camera_pose(kin.random_configuration(rng))
+        d = R[:, 0] + 0.3 * rng.standard_normal(3)
+        cameras.append(p)
+        directions.append(d / np.linalg.norm(d))
+    opt = IkOptions(restarts=0)
+    batched = look_at_residuals(kin, starts, np.array(cameras), np.array(directions), opt)
+    single = np.array(
+        [math.sqrt(_solve_from(kin, starts[i], cameras[i], directions[i], opt)[1]) for i in range(n)]
+    )
+    solved = single < 1e-5
+    assert 0 < solved.sum() < n  # both kinds are tested
+    np.testing.assert_array_equal(batched < 1e-5, solved)
+    np.testing.assert_allclose(batched[~solved], single[~solved], rtol=0.1)
+
+
 def test_look_at_ik_round_trip(arm):
     kin, _ = arm
     rng = np.random.default_rng(2)

@@ -7,6 +7,7 @@ whatever the planner, measurement or number of fruit localised.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -20,7 +21,7 @@ from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.noise import NoiseModel, load_noise_model
 from bve_mj.geometry import ray_frame
 from bve_mj.robot import ArmKinematics, IkOptions, arm_kinematics, look_at_ik
-from bve_mj.robot.ik import image_roll_rad
+from bve_mj.robot.ik import image_roll_rad, look_at_residuals
 from bve_mj.sim.scene import build_scene
 from bve_mj.sim.scene_model import Fruit, SceneInfo
 
@@ -29,6 +30,14 @@ __all__ = ["START_MARGIN", "EpisodeStart", "detection_prior", "start_episode", "
 
 START_MARGIN = 0.15
 """A ready pose is taken once its joints all keep this share of their range from the limits."""
+
+
+_ELEVATIONS = (0.15, 0.35, -0.1, 0.6, -0.3)
+_YAWS = (0.0, 0.3, -0.3)
+_RANDOM_STARTS = 7
+_WORTH_SOLVING = 1e-2
+"""A start whose screened look-at residual ends above this is not solved again: it failed (a
+solved one ends below 1e-5; the tolerances allow about 1e-3)."""
 
 
 def _start_configuration(
@@ -44,26 +53,46 @@ def _start_configuration(
     nearest upright with ``upright`` (the planner moves the arm locally and keeps the branch it starts in). A
     pose folded against its limits strands the planner: seed 0's approach once stalled
     0.127 m from the fruit with three joints at their limits.
+
+    Most starts fail, and a failing start runs every iteration: all of them are first
+    solved at once (:func:`~bve_mj.robot.ik.look_at_residuals`), and only those that come
+    near a solution are solved again, one by one, to the bit as before. ``rng`` draws the
+    same random starts, and is left in the same state, as a search that draws them
+    direction by direction.
     """
-    best: tuple[tuple[float, float], np.ndarray] | None = None
-    single = IkOptions(restarts=0, upright=upright)
-    for elevation in (0.15, 0.35, -0.1, 0.6, -0.3):
-        for yaw in (0.0, 0.3, -0.3):
+    cameras = []
+    for elevation in _ELEVATIONS:
+        for yaw in _YAWS:
             d = np.array([-math.cos(yaw), math.sin(yaw), elevation])
-            p = estimate + distance * d / np.linalg.norm(d)
-            for seed in (kin.home, *(kin.random_configuration(rng) for _ in range(7))):
-                ik = look_at_ik(kin, p, estimate, seed, rng, single)
-                if ik.success:
-                    margin = kin.limit_margin(ik.q)
-                    if upright:
-                        roll = image_roll_rad(kin.camera_pose(ik.q)[1]) or 0.0
-                        key = (min(margin, START_MARGIN), -abs(roll))
-                    else:
-                        key = (margin, 0.0)
-                    if best is None or key > best[0]:
-                        best = (key, ik.q)
-            if best is not None and best[0][0] >= START_MARGIN:
-                return best[1]
+            cameras.append(estimate + distance * d / np.linalg.norm(d))
+    draws = copy.deepcopy(rng)
+    starts = [(kin.home, *(kin.random_configuration(draws) for _ in range(_RANDOM_STARTS))) for _ in cameras]
+    n = _RANDOM_STARTS + 1
+    p_all = np.repeat(np.array(cameras), n, axis=0)
+    towards = estimate - p_all
+    single = IkOptions(restarts=0, upright=upright)
+    residual = look_at_residuals(
+        kin, np.array([q for qs in starts for q in qs]), p_all,
+        towards / np.linalg.norm(towards, axis=1, keepdims=True), single,
+    )  # fmt: skip
+    worth = (residual <= _WORTH_SOLVING).reshape(len(cameras), n)
+    best: tuple[tuple[float, float], np.ndarray] | None = None
+    for p, seeds, solve in zip(cameras, starts, worth, strict=True):
+        for _ in range(_RANDOM_STARTS):  # the draws a direction's search makes
+            kin.random_configuration(rng)
+        for seed in (q for q, ok in zip(seeds, solve, strict=True) if ok):
+            ik = look_at_ik(kin, p, estimate, seed, rng, single)
+            if ik.success:
+                margin = kin.limit_margin(ik.q)
+                if upright:
+                    roll = image_roll_rad(kin.camera_pose(ik.q)[1]) or 0.0
+                    key = (min(margin, START_MARGIN), -abs(roll))
+                else:
+                    key = (margin, 0.0)
+                if best is None or key > best[0]:
+                    best = (key, ik.q)
+        if best is not None and best[0][0] >= START_MARGIN:
+            return best[1]
     if best is None:
         raise PlanningError(f"no reachable ready pose looks at the estimate {estimate.round(3).tolist()}")
     return best[1]

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from bve_mj.geometry import skew
-from bve_mj.robot.kinematics import ArmKinematics
+from bve_mj.robot.kinematics import ArmKinematics, cross3
 
-__all__ = ["IkOptions", "IkResult", "image_roll_rad", "level_camera", "look_at_ik"]
+__all__ = ["IkOptions", "IkResult", "image_roll_rad", "level_camera", "look_at_ik", "look_at_residuals"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -99,6 +99,52 @@ def _solve_from(
             if lam > 1e6:
                 break
     return q, cost, iterations
+
+
+def look_at_residuals(
+    kin: ArmKinematics, q_starts: np.ndarray, p_world_camera: np.ndarray, directions: np.ndarray,
+    options: IkOptions | None = None,
+) -> np.ndarray:  # fmt: skip
+    """Many look-at problems solved at once from their starts, the way one start of
+    :func:`look_at_ik` solves one (the same damped least squares, step for step, on
+    :meth:`~bve_mj.robot.kinematics.ArmKinematics.camera_poses_and_jacobians`), returning
+    only each one's final residual ‖r‖ = ‖[p(q) - p*; x(q) - d]‖ (N,). Its rounding differs
+    from the single solve's, so it tells which starts are worth solving (the failures, which
+    run every iteration, cost most), not the joint angles.
+
+    ``q_starts`` (N, n), ``p_world_camera`` (N, 3), ``directions`` (N, 3) unit vectors from
+    the camera to the point it looks at."""
+    opt = options or IkOptions()
+    p_star = np.asarray(p_world_camera, dtype=float)
+    d = np.asarray(directions, dtype=float)
+    q = kin.clip(q_starts)
+    lam = np.full(len(q), opt.initial_damping)
+    p, R, J = kin.camera_poses_and_jacobians(q)
+    r = np.concatenate((p - p_star, R[:, :, 0] - d), axis=1)
+    cost = np.einsum("ij,ij->i", r, r)
+    active = np.ones(len(q), dtype=bool)
+    eye = np.eye(kin.nq)
+    for _ in range(opt.max_iterations):
+        i = np.flatnonzero(active)
+        if not len(i):
+            break
+        x = R[i, :, 0]
+        Jr = np.concatenate((J[i, :3], -cross3(x[:, :, None], J[i, 3:], axis=1)), axis=1)
+        g = np.einsum("kji,kj->ki", Jr, r[i])
+        step = np.linalg.solve(np.einsum("kji,kjl->kil", Jr, Jr) + lam[i, None, None] * eye, -g[:, :, None])
+        q_new = kin.clip(q[i] + step[:, :, 0])
+        p_n, R_n, J_n = kin.camera_poses_and_jacobians(q_new)
+        r_n = np.concatenate((p_n - p_star[i], R_n[:, :, 0] - d[i]), axis=1)
+        cost_n = np.einsum("ij,ij->i", r_n, r_n)
+        better = cost_n < cost[i]
+        k = i[better]
+        q[k], R[k], J[k], r[k], cost[k] = q_new[better], R_n[better], J_n[better], r_n[better], cost_n[better]
+        lam[k] = np.maximum(lam[k] / 3.0, 1e-9)
+        worse = i[~better]
+        lam[worse] *= 5.0
+        active[k[cost[k] < (0.1 * opt.position_tol_m) ** 2]] = False
+        active[worse[lam[worse] > 1e6]] = False
+    return np.sqrt(cost)
 
 
 def look_at_ik(
