@@ -1,13 +1,13 @@
 """The harvest over seeds: every visit reached, and none touching a fruit.
 
     python benchmarks/bench_harvest.py [--scenario ripe_truss[,truss_chain,...]] [--episodes 10]
-                                       [--seed 4242] [--quiet]
+                                       [--seed 4242] [--planner bve] [--quiet]
 
 Runs ``bve-mj episode --fruits all --approach`` episodes of each suite scenario (episode ``i``
 seeded as the suite seeds it) and prints per episode each visit (track, reached, least
 distance between the arm and any fruit during the moves [mm]; at most 50 mm is measured) and
-the least distance during the views before the harvest (the BVE's moves, which keep only
-the camera off the plant wall), then per scenario the count of visits, reached, touching a
+the least distance during the views before the harvest (the planner's moves: ``--planner``
+bve, or a baseline: random, circle, fixed), then per scenario the count of visits, reached, touching a
 fruit (least distance <= 0), and episodes whose views touched one.
 Target (issue 14): every ripe fruit visited within 0.1 m, never touching any fruit.
 """
@@ -17,12 +17,13 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
+from typing import get_args
 
 import numpy as np
 
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.campaigns.spec import episode_seed
-from bve_mj.config import with_overrides
+from bve_mj.config import PlannerKind, with_overrides
 from bve_mj.errors import BveError
 from bve_mj.loop.arm_clearance import FruitClearance
 from bve_mj.loop.every_fruit import FruitsView
@@ -73,10 +74,13 @@ def main() -> None:
     ap.add_argument("--scenario", default="ripe_truss")
     ap.add_argument("--episodes", type=int, default=10)
     ap.add_argument("--seed", type=int, default=4242)
+    ap.add_argument("--planner", default="bve", help="the views' planner: bve, random, circle or fixed")
     ap.add_argument("--quiet", action="store_true", help="only the count per scenario")
     args = ap.parse_args()
     if args.episodes < 1:
         ap.error("--episodes: must be at least 1")
+    if args.planner not in get_args(PlannerKind):
+        ap.error(f"--planner: one of {', '.join(get_args(PlannerKind))}")
     try:
         suite = load_suite(only=args.scenario.split(","))
     except BveError as exc:
@@ -84,7 +88,9 @@ def main() -> None:
     lines = []
     for sc in suite:
         base = sc.settings("camera", None, "centre_radius")
-        settings = with_overrides(base, tracking={"fruits": "all"}, episode={"approach": True})
+        settings = with_overrides(
+            base, tracking={"fruits": "all"}, episode={"approach": True}, planner={"kind": args.planner}
+        )
         visits = reached = touched = views_touched = 0
         for run in range(args.episodes):
             views = ViewsClearance()

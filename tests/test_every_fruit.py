@@ -415,6 +415,51 @@ def test_a_one_target_move_into_the_fruit_it_localises_is_refused_and_the_loop_h
     assert planner.planner.q is q0
 
 
+def test_baselines_take_only_views_whose_moves_keep_clear():
+    """The baselines' clearance (:class:`BaselineClearance`): ``clear`` holds for a camera
+    point the arm reaches by a clear move, fails where the camera would sit inside a known
+    fruit and where no pose reaches; a random baseline with it chooses only points reached
+    clear of a canopy 5 mm in front of the arm, and its plans carry the pose checked (the
+    camera there); without it the same baseline moves into the canopy."""
+    from bve_mj.config.experiments import EXPERIMENTS
+    from bve_mj.loop.arm_clearance import BaselineClearance, Obstacles, deepest_x, path_clearance
+    from bve_mj.robot import make_arm_planner
+
+    world, q0 = _arm_world()
+    world.q = q0
+    p0, R0 = world.kin.camera_pose(q0)
+    s = with_overrides(Settings(), planner={"kind": "random"})
+    k_hat = p0 + s.band_distance_m * R0[:, 0]
+    none = Obstacles((), np.zeros((0, 4)), np.inf)
+    known = [none]
+    check = BaselineClearance(world, lambda: known[0], upright=False)
+    clear = check.constraints(k_hat)[0]
+    c = p0 + 0.03 * R0[:, 0]  # 3 cm forward along the optical axis
+    assert clear.value(c) < 0.0
+    plan = check.posed(ViewPlan(c, k_hat, "optimal", True, 0.0))
+    np.testing.assert_allclose(world.kin.camera_pose(plan.q)[0], c, atol=1e-4)
+    known[0] = Obstacles((0,), np.array([[*(p0 + 0.04 * R0[:, 0]), 0.02]]), np.inf)  # 2 cm ahead now
+    assert clear.value(c) > 0.0
+    assert clear.value(p0 + np.array([2.0, 0.0, 0.0])) == 1.0  # out of reach
+    front = deepest_x(world, q0) + 0.005
+    known[0] = Obstacles((), np.zeros((0, 4)), front)
+
+    def plans(checks) -> list[ViewPlan]:
+        baseline = make_arm_planner(s, EXPERIMENTS["E5"].loss, ["band"], world.kin, q0,
+                                    np.random.default_rng(3), checks)  # fmt: skip
+        planner = check.planner(baseline) if checks is not None else baseline
+        return [planner.plan(Belief.isotropic(k_hat, 0.005), p0, i) for i in range(12)]
+
+    checked = plans(check.constraints)
+    assert all(p.q is not None for p in checked)
+    for p in checked:
+        np.testing.assert_allclose(world.kin.camera_pose(p.q)[0], p.p_world_camera, atol=1e-4)
+        assert path_clearance(world, q0, p.q, np.zeros((0, 4)), front) >= 0.0
+    # the control: unchecked, some of the same baseline's points take the arm into the canopy
+    unchecked = [p.p_world_camera for p in plans(None)]
+    assert any(clear.value(c) > 0.0 for c in unchecked)
+
+
 def test_the_obstacles_are_every_confirmed_track_and_fruit_seen_in_part_and_the_canopy_before_them():
     """A harvest keeps clear of what it knows: each sphere is a fruit's estimate with its
     radius plus 3σmax, fruit seen in part included, those known to less than their radius

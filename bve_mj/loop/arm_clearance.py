@@ -1,5 +1,6 @@
 """What the arm keeps clear of, and how close it came: the harvest's visits, the every-fruit
-views and the one-target loop's moves (:class:`ClearMovesPlanner`).
+views (the BVE's and, through :class:`BaselineClearance`, the baselines') and the one-target
+loop's moves (:class:`ClearMovesPlanner`).
 
 **What the robot knows** (:class:`Obstacles`), never the scene's truth:
 
@@ -21,8 +22,9 @@ the least distance between the arm's geoms and every true fruit (MuJoCo's
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -31,13 +33,16 @@ import numpy as np
 
 from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
+from bve_mj.planning.constraints import Constraint
 from bve_mj.planning.plan import Planner, PlannerAround, ViewPlan
+from bve_mj.robot.ik import IkOptions, look_at_ik
 from bve_mj.sim.mujoco_world import MujocoWorld
 from bve_mj.sim.scene_model import SceneInfo, fruit_geom_name
 
 __all__ = [
     "CANOPY_MARGIN_M",
     "PATH_CLEARANCE_M",
+    "BaselineClearance",
     "ClearMovesPlanner",
     "FruitClearance",
     "KnownFruit",
@@ -265,3 +270,80 @@ class ClearMovesPlanner(PlannerAround):
                 f"view {iteration}: the move passes {-1e3 * clear:.0f} mm into the fruit or the canopy"
             )
         return plan
+
+
+_BASELINE_IK = IkOptions(restarts=4)  # a checked candidate's pose, from the arm's pose now
+
+
+class BaselineClearance:
+    """The clearance check of the every-fruit views for the baselines (random, circle, fixed
+    views), which plan camera positions and leave the arm's pose to the move.
+
+    :meth:`constraints` gives the baselines one more expensive task constraint (checked on
+    candidates that pass every cheap one, after the arm's reachability; see
+    :mod:`bve_mj.planning.baselines`): ``clear``, the look-at IK from the arm's pose now and
+    :func:`path_clearance` of the move to it against ``known()`` (value ``PATH_CLEARANCE_M``
+    less the clearance, ≤ 0 where clear; 1 m where the IK finds no pose). A random candidate
+    that fails it is passed over, a circle or fixed-views point backed off towards the
+    camera, as for reachability. :meth:`planner` hands each plan the pose its point was
+    checked with, so the arm moves there and nowhere else (a point never checked, the camera
+    where it is or a plan restoring feasibility, goes as before: the world solves its IK)."""
+
+    def __init__(self, world: MujocoWorld, known: Callable[[], Obstacles], upright: bool) -> None:
+        self.world = world
+        self.known = known
+        self.options = dataclasses.replace(_BASELINE_IK, upright=upright)
+        self._rng = np.random.default_rng(0)
+        self._poses: dict[tuple[float, ...], np.ndarray] = {}
+
+    def constraints(self, k_hat: np.ndarray) -> list[Constraint]:
+        """The ``clear`` constraint of a plan around the estimate ``k_hat`` (the baselines'
+        extra task constraints are built once a plan)."""
+        self._poses = {}
+        return [_ClearMove(self, np.asarray(k_hat, dtype=float).copy())]
+
+    def clearance_at(self, p_world_camera: np.ndarray, k_hat: np.ndarray) -> float:
+        """The clearance of the move to the camera at ``p_world_camera`` looking at ``k_hat``
+        [m]; -1 m where no pose reaches it. The pose is kept for :meth:`planner`."""
+        world = self.world
+        ik = look_at_ik(world.kin, p_world_camera, k_hat, world.q, self._rng, self.options)
+        if not ik.success:
+            return -1.0
+        self._poses[tuple(np.asarray(p_world_camera, dtype=float).tolist())] = ik.q
+        known = self.known()
+        return path_clearance(world, world.q, ik.q, known.spheres, known.canopy_x_m)
+
+    def posed(self, plan: ViewPlan) -> ViewPlan:
+        """``plan`` with the pose its point was checked with (unchanged where it was not)."""
+        q = self._poses.get(tuple(np.asarray(plan.p_world_camera, dtype=float).tolist()))
+        return plan if q is None or plan.q is not None else dataclasses.replace(plan, q=q.copy())
+
+    def planner(self, baseline: Planner) -> Planner:
+        """``baseline`` (built with :meth:`constraints` among its extra constraints), its plans
+        posed (:meth:`posed`)."""
+        return _Posed(baseline, self)
+
+
+@dataclass(frozen=True)
+class _ClearMove:
+    """clear(c) ≤ 0: the move to the camera at c keeps the arm clear (:class:`BaselineClearance`)."""
+
+    check: BaselineClearance
+    k_hat: np.ndarray
+    name: str = "clear"
+    expensive: bool = True
+
+    def value(self, c: np.ndarray) -> float:
+        return PATH_CLEARANCE_M - self.check.clearance_at(c, self.k_hat)
+
+    def gradient(self, c: np.ndarray) -> np.ndarray:
+        raise NotImplementedError("the clearance of a move is checked on candidates, never optimised")
+
+
+class _Posed(PlannerAround):
+    def __init__(self, planner: Planner, check: BaselineClearance) -> None:
+        super().__init__(planner)
+        self.check = check
+
+    def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
+        return self.check.posed(self.planner.plan(belief, p_world_camera, iteration))

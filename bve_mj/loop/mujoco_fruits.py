@@ -29,7 +29,7 @@ from bve_mj.estimation.tracks import Tracker
 from bve_mj.estimation.unmeasured import tracking_config
 from bve_mj.estimation.view_correlation import new_view_share
 from bve_mj.estimation.visibility import visible_arc_deg
-from bve_mj.loop.arm_clearance import PATH_CLEARANCE_M, Obstacles, path_clearance
+from bve_mj.loop.arm_clearance import PATH_CLEARANCE_M, BaselineClearance, Obstacles, path_clearance
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.every_fruit import FruitsResult, FruitState, FruitsView, run_every_fruit
 from bve_mj.loop.harvest import HarvestResult, RecordsHarvest, harvest
@@ -331,19 +331,25 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr)
     seen_in_part = Tracker(tracking_config(s.tracking), zone, radius_prior, update, visible)
 
+    def known() -> Obstacles:  # the fruit known now
+        return Obstacles.of(
+            [t for t in tracker.tracks if t.confirmed], [h for h in seen_in_part.tracks if h.confirmed]
+        )
+
     def clear(plan: ViewPlan) -> bool:  # the move keeps the arm off the fruit known now
         if plan.q is None:
             return True
-        known = Obstacles.of(
-            [t for t in tracker.tracks if t.confirmed], [h for h in seen_in_part.tracks if h.confirmed]
-        )
-        return path_clearance(world, world.q, plan.q, known.spheres, known.canopy_x_m) >= PATH_CLEARANCE_M
+        ahead = known()
+        return path_clearance(world, world.q, plan.q, ahead.spheres, ahead.canopy_x_m) >= PATH_CLEARANCE_M
 
     planner: PlansForEveryFruit
     if s.planner.kind == "bve":
         planner = EveryFruitPlanner(make, gain, visible_from, s.tracking.candidates, clear)
-    else:  # a baseline: one pattern for the whole zone
-        planner = PatternPlanner(make(), zone_belief)
+    else:  # a baseline: one pattern for the whole zone, under the same clearance check
+        check = BaselineClearance(world, known, s.planner.upright > 0.0)
+        q = world.q_measured if world.q_measured is not None else q0
+        baseline = make_arm_planner(search, loss, names, kin, q, planner_rng, check.constraints)
+        planner = PatternPlanner(check.planner(baseline), zone_belief)
     claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF)
     coverage = None
     if s.tracking.zone_framed_share > 0.0:

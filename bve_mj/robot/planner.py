@@ -37,7 +37,7 @@ from bve_mj.errors import ConfigError
 from bve_mj.estimation.belief import Belief
 from bve_mj.planning.baselines import CirclePlanner, FixedViewsPlanner, RandomPlanner
 from bve_mj.planning.bve import SEED_DIRECTIONS, BvePlanner
-from bve_mj.planning.constraints import Constraint, ConstraintName, StepLimit, max_violation
+from bve_mj.planning.constraints import Constraint, ConstraintName, ExtraConstraints, StepLimit, max_violation
 from bve_mj.planning.plan import Planner, PlanStatus, ViewPlan
 from bve_mj.planning.slsqp import minimize_slsqp
 from bve_mj.robot.ik import IkOptions, IkResult, level_camera, look_at_ik
@@ -325,11 +325,14 @@ def make_arm_planner(
     kin: ArmKinematics,
     q_start: np.ndarray,
     rng: np.random.Generator,
+    checks: ExtraConstraints | None = None,
 ) -> Planner:
     """``settings.planner.kind`` with the arm's kinematic feasibility added.
 
     The BVE uses ``settings.robot.formulation``; the baselines get the :class:`Reachability`
-    constraint, so they too only ever choose viewpoints the arm can take.
+    constraint, so they too only ever choose viewpoints the arm can take, and then
+    ``checks(k̂)`` (expensive constraints checked after it: the every-fruit views' clearance,
+    :class:`~bve_mj.loop.arm_clearance.BaselineClearance`). The BVE ignores ``checks``.
     """
     kind = settings.planner.kind
     if kind == "bve":
@@ -340,7 +343,7 @@ def make_arm_planner(
 
     def extra(k_hat: np.ndarray) -> list[Constraint]:
         reach.k_hat = k_hat
-        return [reach]
+        return [reach, *(checks(k_hat) if checks is not None else ())]
 
     if kind == "random":
         return RandomPlanner(settings, constraint_names, rng, extra)
