@@ -211,6 +211,29 @@ def test_a_detection_never_seen_again_is_deleted_after_the_views_planned_for_it(
     assert tracker.tracks == []
 
 
+def test_a_fruit_two_views_place_to_within_its_radius_is_kept_through_misses_until_confirmed():
+    """A tentative track from two views whose rays cross at the fruit (3σmax ≤ r̂) is not
+    deleted by the misses that delete a track of one view (the detector refuses a fruit
+    behind its neighbours from most views); a third view confirms it."""
+    fruit = np.array([0.45, 0.0, 0.3])
+    cfg = TrackingConfig(fruits="all", zone_m=0.2, delete_misses=2)
+    tracker = Tracker(cfg, fruit, (0.03, 0.003), UPDATE, _visible())
+    views = _views(9)
+    for v in (0, 8):  # 80 degrees apart
+        p, R = views[v]
+        tracker.step([Sighting(_z(fruit, 0.03, p, R), _model(p, R))], _model(p, R), v)
+    (track,) = tracker.tracks
+    assert not track.confirmed and track.triangulated
+    assert 3.0 * track.belief.sigma_max_m <= track.radius_m
+    for v in range(1, 8):  # planned for it, every one misses it: 7 > 3 x delete_misses
+        p, R = views[v]
+        tracker.step([], _model(p, R), 10 + v, planned_for=track.id)
+    assert tracker.tracks == [track] and track.failed == 7
+    p, R = views[4]
+    tracker.step([Sighting(_z(fruit, 0.03, p, R), _model(p, R))], _model(p, R), 20)
+    assert track.confirmed and float(np.linalg.norm(track.centre_m - fruit)) < 1e-3
+
+
 def test_two_sightings_of_one_fruit_from_far_apart_views_make_one_track():
     """Two tentative tracks of one fruit cross at it: merged into one (confirmed) track whose
     belief is their information added (the radius prior once)."""

@@ -70,7 +70,7 @@ class TrackingConfig:
         metadata=_why(
             "a track never confirmed is deleted after this many views planned to see it missed it, "
             "or three times as many views that should have seen it (in the image, its outline not "
-            "hidden by another track's)"
+            "hidden by another track's); one that two views place to within its radius is kept"
         ),
     )
     merge_probability: float = field(
