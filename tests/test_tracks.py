@@ -234,6 +234,26 @@ def test_a_fruit_two_views_place_to_within_its_radius_is_kept_through_misses_unt
     assert track.confirmed and float(np.linalg.norm(track.centre_m - fruit)) < 1e-3
 
 
+def test_views_of_a_held_camera_are_one_viewpoint_and_do_not_confirm_a_track():
+    """A camera held where it was (its planner finding no move) sees what it saw: three
+    detections from it are one viewpoint, the track stays tentative (and is not
+    triangulated: one ray); detections from two more viewpoints confirm it."""
+    fruit = np.array([0.45, 0.0, 0.3])
+    tracker = Tracker(TrackingConfig(fruits="all", zone_m=0.2), fruit, (0.03, 0.003), UPDATE, _visible())
+    views = _views(9)
+    p, R = views[2]
+    for v in range(3):
+        held = p + np.array([0.0, 0.0, 1e-4 * v])  # the encoders' jitter
+        tracker.step([Sighting(_z(fruit, 0.03, held, R), _model(held, R))], _model(held, R), v)
+    (track,) = tracker.tracks
+    assert track.hits == 3 and len(track.views) == 3 and len(track.viewpoints) == 1
+    assert not track.confirmed and not track.triangulated
+    for v in (5, 8):
+        p, R = views[v]
+        tracker.step([Sighting(_z(fruit, 0.03, p, R), _model(p, R))], _model(p, R), v)
+    assert track.confirmed and len(track.viewpoints) == 3
+
+
 def test_two_sightings_of_one_fruit_from_far_apart_views_make_one_track():
     """Two tentative tracks of one fruit cross at it: merged into one (confirmed) track whose
     belief is their information added (the radius prior once)."""

@@ -59,7 +59,8 @@ class TrackingConfig:
     confirm_hits: int = field(
         default=3,
         metadata=_why(
-            "a track is confirmed after this many detections: two views of anything fix a point "
+            "a track is confirmed after detections from this many viewpoints (views 1 cm apart or "
+            "more): two views of anything fix a point "
             "with nothing to check it (a false detection lying on another's ray from the second "
             "view would confirm a fruit that is not there: 7 of 80 synthetic trusses with two "
             "false detections at 2, none at 3); a third checks it, and localising takes three anyway"

@@ -17,8 +17,11 @@ centre and radius), and per view:
    prior the range, so the belief is wide along the ray (:func:`belief_from_detection`);
 4. **counts a miss** for each track predicted visible (in the image, its outline not hidden
    by another track's: :mod:`bve_mj.estimation.visibility`) that got no detection; a track
-   is confirmed once its detections come from ``confirm_hits`` views (two detections of one
-   view, merged, are one view's evidence), and deleted when, never confirmed, the
+   is confirmed once its detections come from ``confirm_hits`` viewpoints (two detections of
+   one view, merged, are one view's evidence; so are views from within
+   :data:`SAME_VIEWPOINT_M` of each other: a camera held where it was, its planner finding no
+   move, sees what it saw, and ``ripe_truss`` 4234827545 confirmed a track 47 mm off a fruit
+   from three views of one held camera), and deleted when, never confirmed, the
    views planned to see it missed it ``delete_misses`` times, or any views did three times
    that often (a false detection is not seen again; a real fruit the detector refuses from
    a poor view is, from a good one). A track whose detections from two views or more place
@@ -58,7 +61,21 @@ from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
 from bve_mj.geometry import unit
 
-__all__ = ["Sighting", "Track", "TrackEvent", "Tracker", "ViewTracking", "assign", "belief_from_detection"]
+__all__ = [
+    "SAME_VIEWPOINT_M",
+    "Sighting",
+    "Track",
+    "TrackEvent",
+    "Tracker",
+    "ViewTracking",
+    "assign",
+    "belief_from_detection",
+]
+
+SAME_VIEWPOINT_M = 0.01
+"""A view whose camera lies within this of an earlier view's is the same viewpoint: it sees
+what that one saw (a held camera, a plan that barely moves), no new evidence that the fruit
+is there [m]."""
 
 
 @dataclass
@@ -72,13 +89,16 @@ class Track:
         misses: views that should have seen it (predicted visible) and did not.
         failed: views planned to see it (its turn in the planner) that did not.
         expected: views in which it was predicted visible.
-        confirmed: its detections came from the confirmation count of views, once (two
-            tracks started in one view and merged are one view's evidence, not two).
+        confirmed: its detections came from the confirmation count of viewpoints, once (two
+            tracks started in one view and merged are one view's evidence, not two; a camera
+            held where it was sees what it saw: one viewpoint, however many views).
         first_view, last_view: the views that started it and last saw it.
         innovations: (NIS, dimension) of its assigned detections after the first.
         directions: unit directions fruit → camera of the views fused, for the correlation of
             views from nearby directions (the first's included).
         views: the views whose detections it holds.
+        viewpoints: the camera positions of those views, those within
+            :data:`SAME_VIEWPOINT_M` of an earlier one left out [m].
     """
 
     id: int
@@ -93,6 +113,7 @@ class Track:
     innovations: list[tuple[float, int]] = field(default_factory=list)
     directions: list[np.ndarray] = field(default_factory=list)
     views: set[int] = field(default_factory=set)
+    viewpoints: list[np.ndarray] = field(default_factory=list)
 
     @property
     def centre_m(self) -> np.ndarray:
@@ -110,8 +131,15 @@ class Track:
 
     @property
     def triangulated(self) -> bool:
-        """Detections from two views or more place it to within its radius (3σmax ≤ r̂)."""
-        return len(self.views) >= 2 and 3.0 * self.belief.sigma_max_m <= self.radius_m
+        """Detections from two viewpoints or more place it to within its radius (3σmax ≤ r̂)."""
+        return len(self.viewpoints) >= 2 and 3.0 * self.belief.sigma_max_m <= self.radius_m
+
+    def note_viewpoint(self, p_world_camera: np.ndarray) -> None:
+        """Count the camera position of a view that detected it, unless within
+        :data:`SAME_VIEWPOINT_M` of one counted."""
+        p = np.asarray(p_world_camera, dtype=float)
+        if all(float(np.linalg.norm(p - q)) >= SAME_VIEWPOINT_M for q in self.viewpoints):
+            self.viewpoints.append(p.copy())
 
 
 @dataclass(frozen=True)
@@ -279,11 +307,12 @@ class Tracker:
         t.belief = result.belief
         t.hits += 1
         t.views.add(view)
+        t.note_viewpoint(s.model.p_world_camera)
         t.last_view = view
         t.innovations.append((result.nis, 3))
         t.directions.append(direction)
         events.append(TrackEvent("updated", t.id))
-        if not t.confirmed and len(t.views) >= self.config.confirm_hits:
+        if not t.confirmed and len(t.viewpoints) >= self.config.confirm_hits:
             t.confirmed = True
             events.append(TrackEvent("confirmed", t.id))
 
@@ -305,6 +334,7 @@ class Tracker:
             return None
         t = Track(self._next_id, belief, view, view, confirmed=cfg.confirm_hits <= 1, views={view})
         t.directions.append(unit(s.model.p_world_camera - belief.centre_m))
+        t.note_viewpoint(s.model.p_world_camera)
         self._next_id += 1
         self.tracks.append(t)
         return t
@@ -332,8 +362,10 @@ class Tracker:
                     keep.belief = fused if fused is not None and agree else keep.belief
                     keep.hits += drop.hits
                     keep.views |= drop.views
+                    for q in drop.viewpoints:
+                        keep.note_viewpoint(q)
                     keep.confirmed = (
-                        keep.confirmed or drop.confirmed or len(keep.views) >= self.config.confirm_hits
+                        keep.confirmed or drop.confirmed or len(keep.viewpoints) >= self.config.confirm_hits
                     )
                     keep.innovations += drop.innovations
                     keep.directions += drop.directions
@@ -363,7 +395,11 @@ class Tracker:
         """Copies of the tracks (for records: later views do not change them)."""
         return tuple(
             dataclasses.replace(
-                t, innovations=list(t.innovations), directions=list(t.directions), views=set(t.views)
+                t,
+                innovations=list(t.innovations),
+                directions=list(t.directions),
+                views=set(t.views),
+                viewpoints=list(t.viewpoints),
             )
             for t in self.tracks
         )
