@@ -361,6 +361,33 @@ def test_the_canopy_keeps_the_arm_in_front_and_lets_only_the_hand_in():
     assert path_clearance(world, q1, q2, none, between) < 0.0
 
 
+def test_a_move_leaving_a_sphere_the_arm_is_in_is_measured_against_the_others_only():
+    """``leaving`` (a retreat's check): a geom inside a sphere at the start is not measured
+    against it, so a move that takes it deeper there but nowhere else passes; a sphere the
+    arm starts clear of still counts."""
+    from bve_mj.loop.arm_clearance import path_clearance
+
+    world, q0 = _arm_world()
+    p0, R0 = world.kin.camera_pose(q0)
+    q1 = q0.copy()
+    q1[1] += 0.05  # the hand a little forward
+    tangled = np.array([[*(p0 + 0.01 * R0[:, 0]), 0.03]])  # the camera starts inside it
+    assert path_clearance(world, q0, q1, tangled) < 0.0  # deeper: refused
+    leaving = path_clearance(world, q0, q1, tangled, leaving=True)  # the geoms outside it only
+    assert leaving > 0.0
+    ahead = np.array([[*(p0 + 0.2 * R0[:, 0]), 0.03]])  # ahead, clear of the move
+    both = np.vstack([tangled, ahead])
+    clear_ahead = path_clearance(world, q0, q1, ahead)
+    assert clear_ahead > 0.0
+    assert path_clearance(world, q0, q1, both, leaving=True) == pytest.approx(min(leaving, clear_ahead))
+    q2 = q0.copy()
+    q2[1] += 0.25  # the hand 5 cm or more forward
+    p2, _ = world.kin.camera_pose(q2)
+    into = np.array([[*p2, 0.015]])  # where the camera goes, clear of the arm at the start
+    assert path_clearance(world, q0, q0, into) > 0.0
+    assert path_clearance(world, q0, q2, np.vstack([tangled, into]), leaving=True) < 0.0  # still counts
+
+
 def test_a_one_target_move_into_the_fruit_it_localises_is_refused_and_the_loop_holds():
     """The one-target loop's planner (:class:`ClearMovesPlanner`): a plan whose move brings
     the hand into the fruit the belief localises raises (the loop then holds the camera);

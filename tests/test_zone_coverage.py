@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from bve_mj.config import TrackingConfig
+from bve_mj.errors import BveError
 from bve_mj.estimation import BearingSizeModel, Belief, filter_update
 from bve_mj.estimation.assignment import Sighting
 from bve_mj.estimation.tracks import Tracker
@@ -216,3 +217,49 @@ def test_the_zone_share_setting_is_validated():
     with pytest.raises(Exception, match=r"tracking\.zone_framed_share"):
         TrackingConfig(zone_framed_share=float("nan"))
     assert TrackingConfig(zone_framed_share=0.0).zone_framed_share == 0.0
+
+
+class _NoView(_Planner):
+    """A planner that never finds a view (every candidate's move blocked, say)."""
+
+    def plan(self, fruits, p_world_camera, iteration, q=None):
+        raise BveError("no fruit's planner found a viewpoint")
+
+    def explore(self, zone, p_world_camera, iteration, q=None):
+        raise BveError("the move to the exploration view passes through a known fruit")
+
+
+def test_a_planner_that_finds_no_view_draws_the_camera_back_instead_of_holding_it():
+    """Where the planner finds no view the camera held sees what it saw; with ``retreat`` the
+    view is the one it draws back (event ``retreated``, plan ``fallback``), and where it
+    draws none the camera holds."""
+    cfg = TrackingConfig(fruits="all", zone_m=0.3)
+
+    def visible(c, r, m):
+        return visible_arc_deg(c, r, m.p_world_camera, m.R_world_camera, F, W, H) >= 150.0
+
+    zone = Belief(np.r_[CENTRE, PRIOR[0]], np.diag([0.15**2] * 3 + [PRIOR[1] ** 2]))
+
+    def run(retreat):
+        world = _World([CENTRE])
+        tracker = Tracker(cfg, CENTRE, PRIOR, filter_update("ekf", 10), visible)
+        res = run_every_fruit(world, _NoView(), tracker, 4, 0.002, 3, zone=zone, retreat=retreat(world))
+        return res, [v.p_world_camera.copy() for v in res.views]
+
+    held, at = run(lambda world: None)
+    assert all(np.array_equal(p, at[0]) for p in at)
+    assert not any(e.kind == "retreated" for v in held.views for e in v.events)
+
+    def back(world):
+        def retreat(look_at):
+            if world.p[0] < CENTRE[0] - 0.4:  # the aisle's edge: nothing farther back
+                return None
+            return ViewPlan(world.p - np.array([0.1, 0.0, 0.0]), look_at.copy(), "optimal", True, 0.0)
+
+        return retreat
+
+    res, at = run(back)
+    xs = [p[0] for p in at]
+    assert xs[1] < xs[0] and xs[2] < xs[1] and xs[3] == xs[2] == xs[4]  # two steps back, then held
+    assert [any(e.kind == "retreated" for e in v.events) for v in res.views[1:]] == [True, True, False, False]
+    assert all(v.plan_status == "fallback" for v in res.views[1:])

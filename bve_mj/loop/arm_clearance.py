@@ -49,6 +49,7 @@ __all__ = [
     "Obstacles",
     "deepest_x",
     "path_clearance",
+    "retreat_view",
 ]
 
 PATH_CLEARANCE_M = 0.0
@@ -147,6 +148,7 @@ def path_clearance(
     spheres: np.ndarray,
     canopy_x_m: float = math.inf,
     hand: bool = True,
+    leaving: bool = False,
 ) -> float:
     """The least distance between the arm's geoms and the ``spheres`` (n, 4: centre, radius)
     or the canopy's front over the straight joint-space path ``q_from`` → ``q_to`` (sampled),
@@ -155,7 +157,10 @@ def path_clearance(
     The canopy's front is the plane x = ``canopy_x_m``; ``hand`` False: the last joint's link
     (flange and camera) may enter it (the approach). A move that starts inside (the last
     view's pose may be) is measured against its way out: a geom inside a sphere or behind
-    the canopy's front at ``q_from`` may not go deeper than it starts."""
+    the canopy's front at ``q_from`` may not go deeper than it starts. ``leaving``: a move
+    out of an arm tangled with the spheres (:func:`retreat_view`): a geom inside a sphere at
+    ``q_from`` is not measured against that sphere at all (it is leaving it); every other
+    geom and sphere, and the canopy, as above."""
     if len(spheres) == 0 and not math.isfinite(canopy_x_m):
         return math.inf
     m = world.model
@@ -177,7 +182,10 @@ def path_clearance(
             local = np.einsum("knj,kji->kni", spheres[None, :, :3] - pos[:, None, :], R)
             outside = local - np.clip(local, -half[:, None, :], half[:, None, :])
             gap = np.linalg.norm(outside, axis=2) - spheres[None, :, 3]
-            inside = np.minimum(gap, 0.0) if inside is None else inside
+            if inside is None:
+                inside = np.minimum(gap, 0.0)
+                if leaving:
+                    inside = np.where(inside < 0.0, -np.inf, 0.0)
             least = min(least, float(np.min(gap - inside)))
         if math.isfinite(canopy_x_m) and in_canopy.any():
             gap_x = canopy_x_m - (pos[:, 0] + np.einsum("ki,ki->k", np.abs(R[:, 0, :]), half))  # farthest x
@@ -347,3 +355,34 @@ class _Posed(PlannerAround):
 
     def plan(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
         return self.check.posed(self.planner.plan(belief, p_world_camera, iteration))
+
+
+def retreat_view(
+    world: MujocoWorld,
+    known: Obstacles,
+    look_at: np.ndarray,
+    step_m: float,
+    rng: np.random.Generator,
+    upright: bool,
+) -> ViewPlan | None:
+    """The camera drawn ``step_m`` straight back across the row (towards the aisle, world
+    -x), with the arm's pose for it: a view for when the planner finds none (a camera held
+    where it is sees what it saw). It looks at ``look_at``, or, where that turn's move is not
+    clear, the way it looks now (the smallest move back). The move is checked as one leaving
+    the spheres the arm is in (:func:`path_clearance` with ``leaving``: a planner boxed in
+    by the clearance check is most often an arm inside a known fruit's sphere, which every
+    move deepens somewhere). None where the arm cannot take either or neither move is clear
+    of what the robot knows (``known``)."""
+    p, R = world.kin.camera_pose(world.q)
+    p_back = p - step_m * np.array([1.0, 0.0, 0.0])
+    options = IkOptions(restarts=4, upright=upright)
+    for look in (np.asarray(look_at, dtype=float), p_back + 0.3 * R[:, 0]):
+        if float(np.linalg.norm(look - p_back)) < 1e-6:
+            continue
+        ik = look_at_ik(world.kin, p_back, look, world.q, rng, options)
+        if not ik.success:
+            continue
+        clear = path_clearance(world, world.q, ik.q, known.spheres, known.canopy_x_m, leaving=True)
+        if clear >= PATH_CLEARANCE_M:
+            return ViewPlan(p_back, look.copy(), "optimal", True, 0.0, q=ik.q)
+    return None

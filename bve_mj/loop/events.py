@@ -19,6 +19,7 @@ EventKind = Literal[
     "ik_failure",  # injected: the move's IK failed
     "seen_in_part_reset",  # --fruits all: weak evidence of fruit seen in part broke a belief: restarted
     "zone_unframed",  # --fruits all: a view aimed at a part of the zone not yet framed framed none of it
+    "retreated",  # --fruits all: the planner found no view, and the camera drew back towards the aisle
 ]
 
 

@@ -157,6 +157,7 @@ def run_every_fruit(
     zone: Belief | None = None,
     seen_in_part: Tracker | None = None,
     coverage: ZoneCoverage | None = None,
+    retreat: Callable[[np.ndarray], ViewPlan | None] | None = None,
 ) -> FruitsResult:
     """Observe from the start pose, then up to ``steps`` times: plan for every fruit, move,
     observe, track; stop when every track is localised and the views span
@@ -167,6 +168,12 @@ def run_every_fruit(
     ``seen_in_part``: a tracker for the fruit the world found but could not measure (a world
     that :class:`~bve_mj.sim.world.ReportsUnmeasured`): one confirmed there and explained by
     no track keeps the episode from saying it found every fruit (``incomplete``).
+
+    ``retreat(p_world_target)``: where the planner finds no view, a view drawn back towards
+    the aisle looking at ``p_world_target`` (None where there is none), taken instead of
+    holding the camera (event ``retreated``): a held camera sees what it saw, and one the
+    arm's clearance check has boxed in stays boxed in (``ripe_truss`` 4234827545 held for
+    ten views).
 
     ``coverage``: the work zone's grid. The episode says it found every fruit only once its
     views have framed ``tracking.zone_framed_share`` of it; until then its exploring views
@@ -280,19 +287,16 @@ def run_every_fruit(
                 elif states and explored_deg(seen_from) >= span:
                     outcome = Outcome.INCOMPLETE  # every fruit found is localised; the rest of
                     break  # the zone cannot be framed: no view left that could find one there
-            plan, target = _explore(planner, aim, tracker, world, i, events), EXPLORE
+            plan, target = _explore(planner, aim, tracker, world, i, events, retreat), EXPLORE
         else:
             t_plan = time.perf_counter()
             try:
                 plan, target = planner.plan(targets, world.p_world_camera, i, world.q_measured)
             except (BveError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
                 worst = max(targets, key=lambda f: f.sigma_max_m)
-                plan = ViewPlan(
-                    world.p_world_camera, worst.belief.centre_m, "fallback", False, math.nan,
-                    plan_s=time.perf_counter() - t_plan,
-                )  # fmt: skip
-                target = worst.id
                 events.append(Event("planner_failed", f"{type(exc).__name__}: {exc}"))
+                plan = _fallback(world, worst.belief.centre_m, retreat, events, t_plan)
+                target = worst.id
         if target is not None and target <= seen_in_part_key(0):
             h_id = seen_in_part_id(target)
             tried[h_id] = tried.get(h_id, 0) + 1
@@ -362,13 +366,30 @@ def _explore(
     world: SeesEveryFruit,
     iteration: int,
     events: list[Event],
+    retreat: Callable[[np.ndarray], ViewPlan | None] | None = None,
 ) -> ViewPlan:
-    """A view exploring the zone, or (no zone belief, or the planner fails) the camera held."""
+    """A view exploring the zone, or (no zone belief, or the planner fails) the fallback."""
     t0 = time.perf_counter()
     if zone is not None:
         try:
             return planner.explore(zone, world.p_world_camera, iteration, world.q_measured)
         except (BveError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
             events.append(Event("planner_failed", f"exploring: {type(exc).__name__}: {exc}"))
-    hold = ViewPlan(world.p_world_camera, tracker.zone_centre_m, "fallback", False, math.nan)
-    return dataclasses.replace(hold, plan_s=time.perf_counter() - t0)
+    return _fallback(world, tracker.zone_centre_m, retreat, events, t0)
+
+
+def _fallback(
+    world: SeesEveryFruit,
+    look_at: np.ndarray,
+    retreat: Callable[[np.ndarray], ViewPlan | None] | None,
+    events: list[Event],
+    t0: float,
+) -> ViewPlan:
+    """Where the planner found no view: the view ``retreat`` draws back, or the camera held."""
+    back = None if retreat is None else retreat(look_at)
+    if back is not None:
+        events.append(Event("retreated"))
+        plan = dataclasses.replace(back, status="fallback", feasible=False)
+    else:
+        plan = ViewPlan(world.p_world_camera, look_at, "fallback", False, math.nan)
+    return dataclasses.replace(plan, plan_s=time.perf_counter() - t0)

@@ -29,7 +29,13 @@ from bve_mj.estimation.tracks import Tracker
 from bve_mj.estimation.unmeasured import tracking_config
 from bve_mj.estimation.view_correlation import new_view_share
 from bve_mj.estimation.visibility import visible_arc_deg
-from bve_mj.loop.arm_clearance import PATH_CLEARANCE_M, BaselineClearance, Obstacles, path_clearance
+from bve_mj.loop.arm_clearance import (
+    PATH_CLEARANCE_M,
+    BaselineClearance,
+    Obstacles,
+    path_clearance,
+    retreat_view,
+)
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.every_fruit import FruitsResult, FruitState, FruitsView, run_every_fruit
 from bve_mj.loop.harvest import HarvestResult, RecordsHarvest, harvest
@@ -342,6 +348,9 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         ahead = known()
         return path_clearance(world, world.q, plan.q, ahead.spheres, ahead.canopy_x_m) >= PATH_CLEARANCE_M
 
+    def retreat(look_at: np.ndarray) -> ViewPlan | None:  # one step back towards the aisle
+        return retreat_view(world, known(), look_at, search.step_m, planner_rng, s.planner.upright > 0.0)
+
     planner: PlansForEveryFruit
     if s.planner.kind == "bve":
         planner = EveryFruitPlanner(make, gain, visible_from, s.tracking.candidates, clear)
@@ -367,7 +376,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         result = run_every_fruit(
             world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims,
             on_view=None if recorder is None else recorder.on_view, zone=zone_belief,
-            seen_in_part=seen_in_part, coverage=coverage,
+            seen_in_part=seen_in_part, coverage=coverage, retreat=retreat,
         )  # fmt: skip
         visits = None
         if s.episode.approach and result.final:
