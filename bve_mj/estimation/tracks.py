@@ -18,10 +18,9 @@ centre and radius), and per view:
 4. **counts a miss** for each track predicted visible (in the image, its outline not hidden
    by another track's: :mod:`bve_mj.estimation.visibility`) that got no detection; a track
    is confirmed once its detections come from ``confirm_hits`` viewpoints (two detections of
-   one view, merged, are one view's evidence; so are views from within
-   :data:`SAME_VIEWPOINT_M` of each other: a camera held where it was, its planner finding no
-   move, sees what it saw, and ``ripe_truss`` 4234827545 confirmed a track 47 mm off a fruit
-   from three views of one held camera), and deleted when, never confirmed, the
+   one view, merged, are one view's evidence; so are views within :data:`SAME_VIEWPOINT_M`
+   of each other: ``ripe_truss`` 4234827545 confirmed a track 47 mm off a fruit from three
+   views of one held camera), and deleted when, never confirmed, the
    views planned to see it missed it ``delete_misses`` times, or any views did three times
    that often (a false detection is not seen again; a real fruit the detector refuses from
    a poor view is, from a good one). A track whose detections from two views or more place
@@ -61,16 +60,7 @@ from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
 from bve_mj.geometry import unit
 
-__all__ = [
-    "SAME_VIEWPOINT_M",
-    "Sighting",
-    "Track",
-    "TrackEvent",
-    "Tracker",
-    "ViewTracking",
-    "assign",
-    "belief_from_detection",
-]
+__all__ = ["Sighting", "Track", "TrackEvent", "Tracker", "ViewTracking", "assign", "belief_from_detection"]
 
 SAME_VIEWPOINT_M = 0.01
 """A view whose camera lies within this of an earlier view's is the same viewpoint: it sees
