@@ -113,6 +113,18 @@ class Obstacles:
         front = float(np.median(fronts)) - CANOPY_MARGIN_M if fronts else math.inf
         return cls(tuple(i for *_, i in kept), spheres, front)
 
+    def clearance(
+        self,
+        world: MujocoWorld,
+        q_from: np.ndarray,
+        q_to: np.ndarray,
+        *,
+        hand: bool = True,
+        leaving: bool = False,
+    ) -> float:
+        """:func:`path_clearance` of the move ``q_from`` → ``q_to`` against these [m]."""
+        return path_clearance(world, q_from, q_to, self.spheres, self.canopy_x_m, hand=hand, leaving=leaving)
+
     def without(self, track: int) -> np.ndarray:
         """The spheres of every obstacle but the track ``track`` (the fruit visited), (m, 4)."""
         return self.spheres[[i != track for i in self.ids]].reshape(-1, 4)
@@ -319,7 +331,7 @@ class BaselineClearance:
             return -1.0
         self._poses[tuple(np.asarray(p_world_camera, dtype=float).tolist())] = ik.q
         known = self.known()
-        return path_clearance(world, world.q, ik.q, known.spheres, known.canopy_x_m)
+        return known.clearance(world, world.q, ik.q)
 
     def posed(self, plan: ViewPlan) -> ViewPlan:
         """``plan`` with the pose its point was checked with (unchanged where it was not)."""
@@ -382,7 +394,6 @@ def retreat_view(
         ik = look_at_ik(world.kin, p_back, look, world.q, rng, options)
         if not ik.success:
             continue
-        clear = path_clearance(world, world.q, ik.q, known.spheres, known.canopy_x_m, leaving=True)
-        if clear >= PATH_CLEARANCE_M:
+        if known.clearance(world, world.q, ik.q, leaving=True) >= PATH_CLEARANCE_M:
             return ViewPlan(p_back, look.copy(), "optimal", True, 0.0, q=ik.q)
     return None

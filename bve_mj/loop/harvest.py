@@ -47,7 +47,6 @@ from bve_mj.loop.arm_clearance import (
     FruitClearance,
     Obstacles,
     deepest_x,
-    path_clearance,
 )
 from bve_mj.loop.every_fruit import FruitState
 from bve_mj.planning.plan import ViewPlan
@@ -246,9 +245,8 @@ def _approach(
         if not ik.success:
             continue
         if (
-            path_clearance(world, world.q, pre.q, known.spheres, known.canopy_x_m) < PATH_CLEARANCE_M
-            or path_clearance(world, pre.q, ik.q, known.spheres, known.canopy_x_m, hand=False)
-            < PATH_CLEARANCE_M
+            known.clearance(world, world.q, pre.q) < PATH_CLEARANCE_M
+            or known.clearance(world, pre.q, ik.q, hand=False) < PATH_CLEARANCE_M
         ):
             blocked = True
             continue
@@ -270,10 +268,7 @@ def _leave_canopy(world: MujocoWorld, known: Obstacles, rng: np.random.Generator
     p_back = p - (depth + CANOPY_MARGIN_M) * np.array([1.0, 0.0, 0.0])
     look = p_back + 0.3 * R[:, 0]
     ik = look_at_ik(world.kin, p_back, look, world.q, rng, options)
-    if (
-        ik.success
-        and path_clearance(world, world.q, ik.q, known.spheres, known.canopy_x_m) >= PATH_CLEARANCE_M
-    ):
+    if ik.success and known.clearance(world, world.q, ik.q) >= PATH_CLEARANCE_M:
         world.move_camera(ViewPlan(p_back, look, "optimal", True, 0.0, q=ik.q))
 
 

@@ -33,7 +33,6 @@ from bve_mj.loop.arm_clearance import (
     PATH_CLEARANCE_M,
     BaselineClearance,
     Obstacles,
-    path_clearance,
     retreat_view,
 )
 from bve_mj.loop.claims import Claims
@@ -345,8 +344,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     def clear(plan: ViewPlan) -> bool:  # the move keeps the arm off the fruit known now
         if plan.q is None:
             return True
-        ahead = known()
-        return path_clearance(world, world.q, plan.q, ahead.spheres, ahead.canopy_x_m) >= PATH_CLEARANCE_M
+        return known().clearance(world, world.q, plan.q) >= PATH_CLEARANCE_M
 
     def retreat(look_at: np.ndarray) -> ViewPlan | None:  # one step back towards the aisle
         return retreat_view(world, known(), look_at, search.step_m, planner_rng, s.planner.upright > 0.0)
