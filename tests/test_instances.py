@@ -19,7 +19,9 @@ from bve_mj.geometry import camera_rotation
 from bve_mj.perception import Detection, Intrinsics, NoDetection, Prediction, detect, ripe_mask
 from bve_mj.perception.instances import (
     Arc,
+    _join_split,
     concave_corners,
+    fit_circle,
     group_arcs,
     hull_points,
     outline_arcs,
@@ -545,6 +547,43 @@ def test_the_pieces_of_a_disc_cut_by_a_stripe_are_one_fruit():
     assert len(found[0].blobs) == 2  # the largest fruit found has arcs of both pieces
     assert np.linalg.norm(found[0].circle.centre - (150.5, 120.5)) < 1.0
     assert abs(found[0].circle.radius - 60) < 1.0
+
+
+@pytest.mark.parametrize("angle_deg", [0.0, 35.0, 90.0])
+def test_the_pieces_of_an_oval_fruit_cut_by_a_stem_are_one_fruit(angle_deg):
+    """A fruit that is not a sphere is an ellipse in the image. Cut in two by a stem, the
+    circle through each piece's arcs is off by pixels, so each piece lies off the other's
+    circle; the circle through both holds them both: one fruit, not two."""
+    mask = np.zeros((240, 300), np.uint8)
+    cv2.ellipse(mask, (150, 120), (60, 52), angle_deg, 0, 360, 255, -1)
+    cv2.line(mask, (60, 40), (240, 200), 0, 9)  # a stem across it, obliquely: two blobs
+    outlines = _outline(mask)
+    assert len(outlines) == 2
+    arcs = []
+    for k, outline in enumerate(outlines):
+        arcs += outline_arcs(outline, np.ones(len(outline), bool), k)
+    found = group_arcs(arcs, shape_rel=0.1)
+    assert len(found) == 1 and found[0].blobs == {0, 1}
+    assert np.linalg.norm(found[0].circle.centre - (150.5, 120.5)) < 2.0
+    assert 52 <= found[0].circle.radius <= 60
+
+
+@pytest.mark.parametrize(("shown_deg", "joined"), [(240, False), (140, True)])
+def test_a_part_that_fixes_its_own_circle_is_not_joined_to_an_arc_off_it(shown_deg, joined):
+    """An arc 4-8 px outside a fruit's circle (a fruit behind it, peeping out) lies on the
+    circle through both within an oval fruit's allowance. Where the fruit shows 240° of its
+    outline its own circle is fixed and the arc is another fruit's: no join. Where it shows
+    140°, neither circle is fixed and the two are one fruit's parts: joined."""
+
+    def arc(cx, cy, r, a0, a1):
+        t = np.radians(np.arange(a0, a1, 1.0))
+        return Arc(np.column_stack((cx + r * np.cos(t), cy + r * np.sin(t))), 0, True)
+
+    half = shown_deg / 2
+    a, b = arc(100, 100, 60, 180 - half, 180 + half), arc(104, 100, 64, -50, 50)
+    groups = [(fit_circle(a.points), [0]), (fit_circle(b.points), [1])]
+    out = _join_split(groups, [a, b], lambda c: max(2.0, 0.04 * c.radius), 0.1)
+    assert len(out) == (1 if joined else 2)
 
 
 def test_hull_points_are_the_convex_silhouette_candidates():

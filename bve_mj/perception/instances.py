@@ -9,14 +9,16 @@ union of overlapping circles turns inwards wherever two of them meet. So:
    pockets between the outline and its convex hull), at its sharp corners (where the
    silhouette meets the straight edge of a stem or leaf across it) and where it runs along
    the image edge; the few points at each end of an arc that meets a corner are blended
-   with the neighbour and left out;
+   with the neighbour and left out (:mod:`bve_mj.perception.outline_cuts`);
 2. arcs that bend inwards or run straight (the edge of a calyx, a stem, a leaf; the gap
    between fragments) are occluder edges, not silhouette: they are dropped;
 3. the arcs are grouped into fruit: the arc that best fits its own circle seeds one, arcs
    lying on that circle join one at a time (the circle refitted after each), and an arc on
-   no circle seeds its own; groups lying on one circle are merged. Arcs of one fruit on both
-   sides of an occluder join; arcs of two touching fruit do not, whatever the overlap,
-   because each lies on its own circle.
+   no circle seeds its own; groups lying on one circle are merged, and so are two groups
+   whose circles nearly coincide when the circle through both holds each (the parts of an
+   oval fruit cut by a stem, each part's own circle off by pixels). Arcs of one fruit on
+   both sides of an occluder join; arcs of two touching fruit do not, whatever the
+   overlap, because each lies on its own circle.
 
 Where two fruit meet there is no outline at all (red on red): the mask runs on over the
 junction. But the nearer fruit's rim is still an edge of brightness there (its limb darkens
@@ -31,10 +33,14 @@ centres: OpenCV's indices + 0.5).
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
+from bve_mj.perception.outline_cuts import Arc, _median, concave_corners, outline_arcs, sharp_corners
 
 __all__ = [
     "Arc",
@@ -55,31 +61,6 @@ class Circle:
 
     centre: np.ndarray
     radius: float
-
-
-@dataclass(frozen=True, eq=False)
-class Arc:
-    """A stretch of a blob's outline between two corners (concave, or sharp where an occluder
-    edge meets the silhouette) or the image edge.
-
-    Attributes:
-        points: (N, 2) in outline order [px].
-        blob: which blob it bounds (the caller's number for it).
-        convex: it bends outwards, as a silhouette does (an occluder edge bends inwards or
-            runs straight).
-        interior: it is not the blob's outline but an edge inside the ripe mask (a step in
-            brightness where a fruit's rim lies over a ripe neighbour: red on red). Such an
-            arc joins a fruit whose circle it lies on, and never seeds one (a cast shadow, a
-            blush, a highlight's rim are edges inside a fruit too). Its points are the pixels
-            where the brightness changes fastest, which lie about as far inside the true
-            silhouette as an outline's boundary pixels (the limb darkens into the edge), so
-            the fit treats both alike.
-    """
-
-    points: np.ndarray
-    blob: int
-    convex: bool
-    interior: bool = False
 
 
 @dataclass(frozen=True)
@@ -115,12 +96,6 @@ def fit_circle(points: np.ndarray) -> Circle | None:
     return Circle(sol[:2] + mean, float(np.sqrt(r2)))
 
 
-def _median(x: np.ndarray) -> float:
-    """The (upper) median, by partition: much cheaper than np.median on short arrays."""
-    k = len(x) // 2
-    return float(np.partition(x, k)[k])
-
-
 def _robust_circle(points: np.ndarray, passes: int = 6) -> Circle | None:
     """A circle fit that drops points well inside it (occluder edges: a calyx, a leaf), at a
     threshold that tightens to 3 robust σ of the points kept (never below 1 px), and points
@@ -139,127 +114,6 @@ def _robust_circle(points: np.ndarray, passes: int = 6) -> Circle | None:
         keep = new_keep
         circle = fit_circle(points[keep])
     return circle
-
-
-def _orientation(outline: np.ndarray) -> float:
-    """+1 or -1: the sign that makes depths into the interior positive (shoelace area)."""
-    x, y = outline[:, 0], outline[:, 1]
-    return 1.0 if float(x @ np.roll(y, -1) - np.roll(x, -1) @ y) > 0.0 else -1.0
-
-
-def _depth(points: np.ndarray, a: np.ndarray, b: np.ndarray, inward: float) -> np.ndarray:
-    """Signed distance of points from the chord a→b, positive into the shape's interior."""
-    chord = b - a
-    length = float(np.linalg.norm(chord))
-    if length < 1e-9:
-        return np.zeros(len(points))
-    rel = points - a
-    return inward * (rel[:, 1] * chord[0] - rel[:, 0] * chord[1]) / length
-
-
-def concave_corners(outline: np.ndarray, depth_px: float) -> np.ndarray:
-    """Indices of the concave corners of a closed outline (N, 2), sorted: the deepest point
-    of every pocket between the outline and its convex hull deeper than ``depth_px``, and
-    recursively of the two halves it leaves (a pocket can hold two corners: a junction of
-    two fruit beside a calyx notch)."""
-    n = len(outline)
-    if n < 8:
-        return np.zeros(0, dtype=int)
-    hull = np.sort(cv2.convexHull(outline.astype(np.float32), returnPoints=False).reshape(-1))
-    inward = _orientation(outline)
-    found: list[int] = []
-    # every point's depth below the hull edge spanning it, at once: only the pockets deeper
-    # than the threshold are searched (the rest are the staircase of the pixel grid)
-    edge = (np.searchsorted(hull, np.arange(n), side="right") - 1) % len(hull)
-    a_pt, b_pt = outline[hull[edge]], outline[hull[(edge + 1) % len(hull)]]
-    chord = b_pt - a_pt
-    rel = outline - a_pt
-    length = np.maximum(np.hypot(chord[:, 0], chord[:, 1]), 1e-9)
-    depth = inward * (rel[:, 1] * chord[:, 0] - rel[:, 0] * chord[:, 1]) / length
-    deep = np.unique(edge[depth > depth_px])
-    stack = [(int(hull[e]), int(hull[(e + 1) % len(hull)])) for e in deep]
-    while stack:
-        a, b = stack.pop()
-        span = (b - a) % n
-        if span < 3:
-            continue
-        idx = (a + np.arange(1, span)) % n
-        depth = _depth(outline[idx], outline[a], outline[b], inward)
-        j = int(np.argmax(depth))
-        if depth[j] <= depth_px:
-            continue
-        c = int(idx[j])
-        found.append(c)
-        stack.extend(((a, c), (c, b)))
-    return np.array(sorted(set(found)), dtype=int)
-
-
-def sharp_corners(outline: np.ndarray, step: int = 5, angle_deg: float = 40.0) -> np.ndarray:
-    """Indices of the sharp corners of a closed outline (N, 2), sorted: where the direction
-    over ``step`` points turns by more than ``angle_deg`` (a local maximum of the turn). A
-    silhouette is smooth; it meets the straight edge of a stem or leaf across it at a corner,
-    convex or concave."""
-    n = len(outline)
-    if n < 4 * step:
-        return np.zeros(0, dtype=int)
-    before = outline - np.roll(outline, step, axis=0)
-    after = np.roll(outline, -step, axis=0) - outline
-    cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
-    turn = np.abs(np.arctan2(cross, (before * after).sum(axis=1)))
-    peak = turn >= np.radians(angle_deg)
-    for s in range(1, step + 1):
-        peak &= (turn >= np.roll(turn, s)) & (turn > np.roll(turn, -s))
-    return np.flatnonzero(peak)
-
-
-def outline_arcs(
-    outline: np.ndarray,
-    usable: np.ndarray,
-    blob: int,
-    *,
-    corner_px: float = 1.5,
-    margin: int = 4,
-    min_points: int = 6,
-) -> list[Arc]:
-    """Cut a closed outline (N, 2) into arcs at its concave and sharp corners and its unusable
-    points (the image edge), dropping ``margin`` points at each end of an arc that meets a
-    corner.
-
-    Args:
-        usable: (N,) bool, False where the outline runs along the image edge.
-        blob: the blob's number, carried by its arcs.
-        corner_px: concave corners deeper than this cut the outline [px].
-        margin: points left out at an arc's end beside a corner (blended with the neighbour).
-        min_points: shorter arcs are dropped.
-    """
-    n = len(outline)
-    if n == 0:
-        return []
-    corner = np.zeros(n, dtype=bool)
-    corner[concave_corners(outline, corner_px)] = True
-    corner[sharp_corners(outline)] = True
-    cut = corner | ~usable
-    if not cut.any():  # no corner: the whole outline is one (closed) arc
-        return [Arc(outline, blob, True)] if n >= min_points else []
-    inward = _orientation(outline)
-    order = np.roll(np.arange(n), -int(np.argmax(cut)))  # start at a cut: no run wraps
-    inside = (~cut[order]).astype(np.int8)
-    starts = np.flatnonzero(np.diff(inside) == 1) + 1
-    ends = np.flatnonzero(np.diff(np.append(inside, 0)) == -1) + 1
-    arcs = []
-    for lo, hi in zip(starts, ends, strict=True):
-        lo += margin if corner[order[lo - 1]] else 0
-        hi -= margin if corner[order[hi % n]] else 0
-        if hi - lo < min_points:
-            continue
-        pts = outline[order[lo:hi]]
-        # a silhouette arc bends outwards: its points lie outside its chord, by a sagitta a
-        # long arc cannot lack; a long straight stretch is the edge of a stem or leaf
-        depth = _depth(pts, pts[0], pts[-1], inward)
-        chord = float(np.linalg.norm(pts[-1] - pts[0]))
-        convex = _median(depth) <= 0.5 and (chord < 24.0 or -float(depth.min()) >= 1.0)
-        arcs.append(Arc(pts, blob, convex))
-    return arcs
 
 
 def _shares(
@@ -361,9 +215,57 @@ def group_arcs(
                 groups.append((refit(members, ci), members))
                 merged = True
                 break
+    groups = _join_split(groups, conv, tol, shape_rel)
     fruit = [FruitOutline(c, tuple(conv[m] for m in sorted(ms))) for c, ms in groups]
     fruit.sort(key=lambda fr: -len(fr.points))
     return fruit
+
+
+_FIXED_DEG = 180  # a group showing this much of its outline fixes its own circle [deg]
+
+
+def _join_split(
+    groups: list[tuple[Circle, list[int]]], conv: list[Arc], tol: Callable[[Circle], float], shape_rel: float
+) -> list[tuple[Circle, list[int]]]:
+    """Join two groups that are one fruit split by an occluder across it (a stem, a
+    peduncle): each holds a part of its outline, and the circle through a part is off (a
+    fruit that is not a sphere is an ellipse; a short arc's circle is poorly fixed), so the
+    other part lies off it and the merge above misses it. Two groups whose circles nearly
+    coincide (centres within half the larger radius, radii within a quarter), each showing
+    less than ``_FIXED_DEG`` of its outline, are one fruit when the circle through both holds
+    each as a group's own circle would (half its points on it, almost none outside). A group
+    that shows more fixes its own circle: an arc off it is another fruit's (one behind,
+    peeping out) even where an oval could pass through both."""
+
+    def short(ms: list[int], c: Circle) -> bool:
+        pts = np.vstack([conv[m].points for m in ms])
+        ang = np.arctan2(pts[:, 1] - c.centre[1], pts[:, 0] - c.centre[0])
+        return 10 * len(np.unique(np.floor(np.degrees(ang) / 10.0))) < _FIXED_DEG
+
+    joined = True
+    while joined and len(groups) > 1:
+        joined = False
+        for i, j in itertools.combinations(range(len(groups)), 2):
+            (ci, mi), (cj, mj) = groups[i], groups[j]
+            big = max(ci.radius, cj.radius)
+            if np.hypot(*(ci.centre - cj.centre)) > 0.5 * big or abs(ci.radius - cj.radius) > 0.25 * big:
+                continue
+            if not (short(mi, ci) and short(mj, cj)):
+                continue
+            parts = [np.vstack([conv[m].points for m in ms]) for ms in (mi, mj)]
+            c = _robust_circle(np.vstack(parts))
+            if c is None:
+                continue
+            t, inside = tol(c), shape_rel * c.radius
+            holds = True
+            for pts in parts:
+                r = np.hypot(pts[:, 0] - c.centre[0], pts[:, 1] - c.centre[1]) - c.radius
+                holds &= bool(np.mean((r <= t) & (r >= -(t + inside))) >= 0.5 and np.mean(r > 2.0 * t) <= 0.1)
+            if holds:
+                groups = [g for k, g in enumerate(groups) if k not in (i, j)] + [(c, mi + mj)]
+                joined = True
+                break
+    return groups
 
 
 def hull_points(points: np.ndarray, tol_px: float = 1.0) -> np.ndarray:
