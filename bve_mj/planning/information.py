@@ -250,18 +250,18 @@ class SizeInformation:
             views = tuple(TakenViews.of(corr, self.taken) for corr in self.correlation)
         object.__setattr__(self, "_taken_views", views)
 
-    def _rows(self, c: np.ndarray, x_hat: np.ndarray, with_derivative: bool) -> tuple[
-        np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None
-    ]:  # fmt: skip
-        """H (m, n), W (m,), and their derivatives in c: (m, n, 3), (m, 3)."""
+    def _rows(
+        self, c: np.ndarray, x_hat: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, Callable[[], tuple[np.ndarray, np.ndarray]]]:
+        """H (m, n), W (m,), and a function that gives their derivatives in c, (m, n, 3) and
+        (m, 3), from the same intermediate values (H and W are the same bits whether or not
+        it is called)."""
         n = len(x_hat)
         k, r = x_hat[:3], float(x_hat[3])
         dy, dz, eps = (x_hat[4], x_hat[5], x_hat[6]) if n == 7 else (0.0, 0.0, 0.0)
         g = 1.0 + eps
-        if with_derivative:
-            R, dR = camera_rotation_derivative(c, k)
-        else:
-            R, dR = camera_rotation(c, k), None
+        frame = camera_frame(c, k)
+        R = frame_rotation(frame)
         x = R[:, 0]
         rho = la.norm(k - np.asarray(c, dtype=float))
         s = min(r / rho, 0.99)
@@ -303,23 +303,27 @@ class SizeInformation:
         drows_rho.append(dsize)
         w.append(w_a)
         dw_rho.append(dw_a)
-        H, W = np.array(rows), np.array(w)
+        H, W0 = np.array(rows), np.array(w)
         shares = self._view_shares(-x, rho, len(w))
-        if dR is None:
-            return H, W if shares is None else W * shares[0], None, None
-        drho = -x  # dρ/dc
-        dH = np.einsum("mi,j->mij", np.array(drows_rho), drho)
-        # the columns of R_C^W in the centre's entries: d(coefficient · axis)/dc = coefficient · d(axis)/dc
-        if self.bearing:
-            dH[0, :3, :] += dR[:, 1, :] / (rho * g)
-            dH[1, :3, :] += dR[:, 2, :] / (rho * g)
-        dH[-1, :3, :] += s_a * dR[:, 0, :]
-        dW = np.outer(np.array(dw_rho), drho)
-        if shares is not None:
-            f, df = shares
-            dW = dW * f[:, None] + W[:, None] * df
-            W = W * f
-        return H, W, dH, dW
+        W = W0 if shares is None else W0 * shares[0]
+
+        def derivative() -> tuple[np.ndarray, np.ndarray]:
+            dR = frame_rotation_derivative(frame)
+            drho = -x  # dρ/dc
+            dH = np.einsum("mi,j->mij", np.array(drows_rho), drho)
+            # the columns of R_C^W in the centre's entries: d(coefficient · axis)/dc =
+            # coefficient · d(axis)/dc
+            if self.bearing:
+                dH[0, :3, :] += dR[:, 1, :] / (rho * g)
+                dH[1, :3, :] += dR[:, 2, :] / (rho * g)
+            dH[-1, :3, :] += s_a * dR[:, 0, :]
+            dW = np.outer(np.array(dw_rho), drho)
+            if shares is not None:
+                f, df = shares
+                dW = dW * f[:, None] + W0[:, None] * df
+            return dH, dW
+
+        return H, W, derivative
 
     def _view_shares(self, e: np.ndarray, rho: float, m: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The share Δ of a fresh view that each of the m rows (the bearing rows, then the
@@ -335,15 +339,24 @@ class SizeInformation:
         return f, df
 
     def information(self, c: np.ndarray, x_hat: np.ndarray) -> np.ndarray:
-        H, W, _, _ = self._rows(c, x_hat, False)
+        H, W, _ = self._rows(c, x_hat)
         return (H.T * W) @ H
 
     def information_derivative(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        H, W, dH, dW = self._rows(c, x_hat, True)
-        assert dH is not None and dW is not None
+        L, d_information = self.information_lazy(c, x_hat)
+        return L, d_information()
+
+    def information_lazy(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[np.ndarray, Derivative]:
+        """:meth:`information_derivative` with ∂Λn/∂c computed when asked (same bits)."""
+        H, W, derivative = self._rows(c, x_hat)
         HW = H.T * W  # (n, m)
-        T = np.einsum("im,mjk->ijk", HW, dH)  # Hᵀ W dH
-        return HW @ H, T + T.transpose(1, 0, 2) + np.einsum("mi,mk,mj->ijk", H, dW, H)
+
+        def d_information() -> np.ndarray:
+            dH, dW = derivative()
+            T = np.einsum("im,mjk->ijk", HW, dH)  # Hᵀ W dH
+            return T + T.transpose(1, 0, 2) + np.einsum("mi,mk,mj->ijk", H, dW, H)
+
+        return HW @ H, d_information
 
 
 def size_information(settings: Settings) -> SizeInformation:
@@ -389,7 +402,7 @@ def information_lazy(
     the same bits either way: the optimiser asks for the derivative at about two thirds of the
     points it asks for the value (not at the line search's trial points). Models without a
     lazy form compute both at once."""
-    if isinstance(info, (CameraInformation, RangeInformation, FailedViewDiscount)):
+    if isinstance(info, (CameraInformation, RangeInformation, FailedViewDiscount, SizeInformation)):
         return info.information_lazy(c, x_hat)
     L, dL = info.information_derivative(c, x_hat)
     return L, lambda: dL
