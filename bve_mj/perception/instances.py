@@ -15,8 +15,9 @@ union of overlapping circles turns inwards wherever two of them meet. So:
 3. the arcs are grouped into fruit: the arc that best fits its own circle seeds one, arcs
    lying on that circle join one at a time (the circle refitted after each), and an arc on
    no circle seeds its own; groups lying on one circle are merged, and so are two groups
-   whose circles nearly coincide when the circle through both holds each (the parts of an
-   oval fruit cut by a stem, each part's own circle off by pixels). Arcs of one fruit on
+   whose circles nearly coincide when the circle through both holds each and neither shows
+   180° of its outline (the parts of an oval fruit cut by a stem, each part's own circle
+   off by pixels; a part that shows more fixes its own circle). Arcs of one fruit on
    both sides of an occluder join; arcs of two touching fruit do not, whatever the
    overlap, because each lies on its own circle.
 
@@ -256,12 +257,10 @@ def _join_split(
             c = _robust_circle(np.vstack(parts))
             if c is None:
                 continue
-            t, inside = tol(c), shape_rel * c.radius
-            holds = True
-            for pts in parts:
-                r = np.hypot(pts[:, 0] - c.centre[0], pts[:, 1] - c.centre[1]) - c.radius
-                holds &= bool(np.mean((r <= t) & (r >= -(t + inside))) >= 0.5 and np.mean(r > 2.0 * t) <= 0.1)
-            if holds:
+            sizes = np.array([len(p) for p in parts])
+            arc_of = np.repeat([0, 1], sizes)  # the two groups' points, as two "arcs"
+            on, out = _shares(np.vstack(parts), arc_of, sizes, c, tol(c), shape_rel * c.radius)
+            if np.all(on >= 0.5 * sizes) and np.all(out <= 0.1 * sizes):
                 groups = [g for k, g in enumerate(groups) if k not in (i, j)] + [(c, mi + mj)]
                 joined = True
                 break
