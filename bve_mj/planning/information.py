@@ -61,6 +61,7 @@ __all__ = [
 
 Derivative = Callable[[], np.ndarray]
 """∂Λn/∂c (n, n, 3), computed when called (see :func:`information_lazy`)."""
+_RowDerivatives = Callable[[], tuple[np.ndarray, np.ndarray]]  # ∂H/∂c (m, n, 3), ∂W/∂c (m, 3)
 
 
 def _pad_derivative(dL: np.ndarray, n: int) -> np.ndarray:
@@ -78,11 +79,7 @@ def _pad(L: np.ndarray, dL: np.ndarray | None, n: int) -> tuple[np.ndarray, np.n
         return L, dL
     Ln = np.zeros((n, n))
     Ln[:3, :3] = L
-    if dL is None:
-        return Ln, None
-    dLn = np.zeros((n, n, 3))
-    dLn[:3, :3] = dL
-    return Ln, dLn
+    return Ln, None if dL is None else _pad_derivative(dL, n)
 
 
 class ObservationInformation(Protocol):
@@ -250,12 +247,9 @@ class SizeInformation:
             views = tuple(TakenViews.of(corr, self.taken) for corr in self.correlation)
         object.__setattr__(self, "_taken_views", views)
 
-    def _rows(
-        self, c: np.ndarray, x_hat: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, Callable[[], tuple[np.ndarray, np.ndarray]]]:
+    def _rows(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray, _RowDerivatives]:
         """H (m, n), W (m,), and a function that gives their derivatives in c, (m, n, 3) and
-        (m, 3), from the same intermediate values (H and W are the same bits whether or not
-        it is called)."""
+        (m, 3), from the same intermediates (H and W the same bits whether it is called or not)."""
         n = len(x_hat)
         k, r = x_hat[:3], float(x_hat[3])
         dy, dz, eps = (x_hat[4], x_hat[5], x_hat[6]) if n == 7 else (0.0, 0.0, 0.0)
@@ -311,8 +305,7 @@ class SizeInformation:
             dR = frame_rotation_derivative(frame)
             drho = -x  # dρ/dc
             dH = np.einsum("mi,j->mij", np.array(drows_rho), drho)
-            # the columns of R_C^W in the centre's entries: d(coefficient · axis)/dc =
-            # coefficient · d(axis)/dc
+            # R_C^W's columns in the centre's entries: d(coef · axis)/dc = coef · d(axis)/dc
             if self.bearing:
                 dH[0, :3, :] += dR[:, 1, :] / (rho * g)
                 dH[1, :3, :] += dR[:, 2, :] / (rho * g)
@@ -398,10 +391,9 @@ def observation_information(settings: Settings) -> ObservationInformation:
 def information_lazy(
     info: ObservationInformation, c: np.ndarray, x_hat: np.ndarray
 ) -> tuple[np.ndarray, Derivative]:
-    """``info.information_derivative(c, x_hat)`` as Λn and a function that computes ∂Λn/∂c,
-    the same bits either way: the optimiser asks for the derivative at about two thirds of the
-    points it asks for the value (not at the line search's trial points). Models without a
-    lazy form compute both at once."""
+    """``info.information_derivative(c, x_hat)`` as Λn and a function that computes ∂Λn/∂c, the
+    same bits either way: the optimiser asks for the derivative at half to two thirds of the points
+    it evaluates (not at the line search's trials). Models without a lazy form compute both."""
     if isinstance(info, (CameraInformation, RangeInformation, FailedViewDiscount, SizeInformation)):
         return info.information_lazy(c, x_hat)
     L, dL = info.information_derivative(c, x_hat)
