@@ -1,11 +1,15 @@
 """Campaign throughput: runs per second with 1 and 2 local workers, synthetic and MuJoCo.
 
     python benchmarks/bench_campaign.py [--synthetic-runs 20] [--mujoco-runs 20]
+                                        [--cases synthetic,mujoco,paired]
 
 Synthetic: E1-E10, BVE, range-only, 30 planned views a run. MuJoCo: E5, BVE, camera,
-closed-loop episodes (up to 15 views, stopping rules on). Each configuration runs into a
-fresh directory, so nothing is resumed; the figures include process start-up (spawn) and
-the SQLite commits. Run-level results are checked identical across worker counts.
+closed-loop episodes (up to 15 views, stopping rules on): every episode a scene of its own.
+Paired: the MuJoCo campaign that compares planners (E5, camera; BVE, random, circle) on
+the same ``--mujoco-runs`` seeds: the three episodes of a run share one scene, built,
+compiled and given a render context once by the worker that runs them. Each configuration
+runs into a fresh directory, so nothing is resumed; the figures include process start-up
+(spawn) and the SQLite commits. Run-level results are checked identical across worker counts.
 """
 
 from __future__ import annotations
@@ -28,13 +32,24 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--synthetic-runs", type=int, default=20, help="runs per experiment (10 experiments)")
     ap.add_argument("--mujoco-runs", type=int, default=20, help="episodes (E5)")
+    ap.add_argument("--cases", default="synthetic,mujoco,paired", help="comma-separated")
     args = ap.parse_args()
+    mujoco = {
+        "experiments": ("E5",),
+        "worlds": ("mujoco",),
+        "measurements": ("camera",),
+        "runs": args.mujoco_runs,
+    }
     cases = {
         "synthetic": CampaignSpec(runs=args.synthetic_runs),
-        "mujoco": CampaignSpec(
-            experiments=("E5",), worlds=("mujoco",), measurements=("camera",), runs=args.mujoco_runs
-        ),
+        "mujoco": CampaignSpec(**mujoco),  # type: ignore[arg-type]
+        "paired": CampaignSpec(planners=("bve", "random", "circle"), **mujoco),  # type: ignore[arg-type]
     }
+    chosen = [c.strip() for c in args.cases.split(",") if c.strip()]
+    unknown = [c for c in chosen if c not in cases]
+    if unknown or not chosen:
+        ap.error(f"--cases: {', '.join(unknown) or 'none given'}; allowed: {', '.join(cases)}")
+    cases = {c: cases[c] for c in chosen}
     with tempfile.TemporaryDirectory() as tmp:
         for name, spec in cases.items():
             rows = {}

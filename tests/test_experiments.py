@@ -91,9 +91,10 @@ def test_views_prior_fuses_each_planned_view():
 
 
 def test_tasks_longest_first_each_run_once():
-    """The pool's tasks: MuJoCo runs alone first, then the synthetic runs with the arm (E5,
-    E10: several times the others' time), then the rest, so that no worker idles long at the
-    end; every run exactly once."""
+    """The pool's tasks: MuJoCo runs first, one run index a task with every cell of it (one
+    scene, built once), then the synthetic runs with the arm (E5, E10: several times the
+    others' time), then the rest, so that no worker idles long at the end; every run exactly
+    once."""
     from bve_mj.campaigns.executors import chunks
     from bve_mj.campaigns.spec import CampaignSpec
 
@@ -108,4 +109,12 @@ def test_tasks_longest_first_each_run_once():
         for task in tasks
     ]  # fmt: skip
     assert kinds == sorted(kinds, key=["mujoco", "arm", "other"].index)
-    assert all(len({(c.world, EXPERIMENTS[c.experiment].needs_arm) for c, _ in task}) == 1 for task in tasks)
+    synthetic_tasks = [task for task in tasks if task[0][0].world != "mujoco"]
+    assert all(
+        len({(c.world, EXPERIMENTS[c.experiment].needs_arm) for c, _ in task}) == 1
+        for task in synthetic_tasks
+    )
+    mujoco_cells = [c for c in spec.cells(Settings()) if c.world == "mujoco"]
+    mujoco_tasks = [task for task in tasks if task[0][0].world == "mujoco"]
+    assert len(mujoco_tasks) == 13
+    assert all(len({run for _, run in task}) == 1 and len(task) == len(mujoco_cells) for task in mujoco_tasks)

@@ -305,3 +305,34 @@ def test_renderers_sharing_a_gl_context_draw_their_own_scenes(kin):
     assert np.array_equal(b.look(*views[1])[0], first_b)
     with pytest.raises(RenderError, match="closed"):
         a.look(*views[0])
+
+
+def test_renderers_of_one_model_share_its_context_and_idle_ones_are_bounded(kin):
+    """Renderers of the same model object draw with one render context (made once: a
+    campaign's paired episodes share a compiled scene); closed, it is kept for the next one,
+    which draws the same image; beyond ``IDLE_CONTEXTS`` idle ones the oldest are freed."""
+    from bve_mj.sim import render
+
+    probe = Probe(kin, seed=5)
+    target = probe.info.target.centre_m
+    view = (target + np.array([-0.3, 0.05, 0.08]), target)
+    first, _ = probe.look(*view)
+    ctx = probe.renderer._ctx
+    second = OffscreenRenderer(probe.model, CAMERA.width_px, CAMERA.height_px, hidden_groups=(2,),
+                               blur_sigma_px=CAMERA.blur_sigma_px)  # fmt: skip
+    assert second._ctx is ctx
+    probe.renderer.close()
+    assert np.array_equal(second.render(probe.data, PROBE_CAMERA), first)
+    second.close()
+    probe.renderer = OffscreenRenderer(probe.model, CAMERA.width_px, CAMERA.height_px, hidden_groups=(2,),
+                                       blur_sigma_px=CAMERA.blur_sigma_px)  # fmt: skip
+    assert probe.renderer._ctx is ctx  # kept while idle
+    assert np.array_equal(probe.look(*view)[0], first)
+    probe.renderer.close()
+    others = [Probe(kin, seed=20 + k, leaves=False) for k in range(render.IDLE_CONTEXTS + 1)]
+    for other in others:
+        other.renderer.close()
+    gl_key = probe.renderer._gl_key
+    idle = [e for k, e in render._SHARED.items() if k[2] == gl_key and e.users <= 0]
+    assert len(idle) == render.IDLE_CONTEXTS
+    assert all(e.ctx is not ctx for e in render._SHARED.values())  # the oldest was freed

@@ -87,14 +87,18 @@ def _with_arm(cell: Cell) -> bool:
 
 
 def chunks(items: list[tuple[Cell, int]], workers: int) -> list[tuple[tuple[Cell, int], ...]]:
-    """The runs in tasks, longest first: each MuJoCo run alone, then chunks of the synthetic
-    runs with the arm, then of the others, so that the pool's last tasks are short and no
-    worker idles long at the end. (Every run is seeded on its own and rows are keyed: the
-    order changes no result.)"""
-    mujoco = [it for it in items if it[0].world == "mujoco"]
+    """The runs in tasks, longest first: the MuJoCo runs one run index a task (run ``i`` of
+    every cell is the same scene, built once by the worker that runs them:
+    :data:`bve_mj.loop.start.KEPT_SCENES`), then chunks of the synthetic runs with the arm,
+    then of the others, so that the pool's last tasks are short and no worker idles long at
+    the end. (Every run is seeded on its own and rows are keyed: the order changes no result.)"""
+    mujoco: dict[int, list[tuple[Cell, int]]] = {}
+    for it in items:
+        if it[0].world == "mujoco":
+            mujoco.setdefault(it[1], []).append(it)
     synthetic = [it for it in items if it[0].world != "mujoco"]
     size = max(1, min(10, len(synthetic) // max(1, 4 * workers)))
-    out: list[tuple[tuple[Cell, int], ...]] = [(it,) for it in mujoco]
+    out: list[tuple[tuple[Cell, int], ...]] = [tuple(runs) for runs in mujoco.values()]
     for part in (
         [it for it in synthetic if _with_arm(it[0])],
         [it for it in synthetic if not _with_arm(it[0])],

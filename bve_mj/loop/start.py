@@ -9,13 +9,15 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable
+from collections import OrderedDict
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import mujoco
 import numpy as np
 
-from bve_mj.config import EpisodeConfig, Settings
+from bve_mj.config import CameraConfig, EpisodeConfig, RobotConfig, SceneConfig, Settings
 from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.noise import NoiseModel, load_noise_model
@@ -25,7 +27,15 @@ from bve_mj.robot.ik import image_roll_rad, look_at_residuals
 from bve_mj.sim.scene import build_scene
 from bve_mj.sim.scene_model import Fruit, SceneInfo
 
-__all__ = ["START_MARGIN", "EpisodeStart", "detection_prior", "start_episode", "state_prior"]
+__all__ = [
+    "KEPT_SCENES",
+    "START_MARGIN",
+    "EpisodeStart",
+    "clear_kept_scenes",
+    "detection_prior",
+    "start_episode",
+    "state_prior",
+]
 
 
 START_MARGIN = 0.15
@@ -38,6 +48,75 @@ _RANDOM_STARTS = 7
 _WORTH_SOLVING = 1e-2
 """A start whose screened look-at residual ends above this is not solved again: it failed (a
 solved one ends below 1e-5; the tolerances allow about 1e-3)."""
+
+
+KEPT_SCENES = 2
+"""Compiled scenes (and ready poses) a process keeps for the episodes that follow.
+
+The cells of a campaign are paired: run ``i`` of every cell (another planner, measurement,
+experiment) draws the same scene from the same seed, and its episodes differ only after it.
+A worker that runs them one after another builds, compiles and renders the scene once (a
+render context is kept with its model: :mod:`bve_mj.sim.render`): ~0.5 s of a ~0.9 s E5
+episode on a 2-core CPU. The compiled model is read-only to an episode (its state lives in
+its ``MjData``), so sharing it changes no result (tests/test_scene_reuse.py)."""
+
+_SceneKey = tuple[RobotConfig, SceneConfig, CameraConfig, int, bool]
+_SCENES: OrderedDict[_SceneKey, tuple[mujoco.MjModel, SceneInfo]] = OrderedDict()
+_READY: OrderedDict[tuple[Any, ...], tuple[np.ndarray, Mapping[str, Any]]] = OrderedDict()
+
+
+def clear_kept_scenes() -> None:
+    """Forget the compiled scenes and ready poses this process kept (:data:`KEPT_SCENES`)."""
+    _SCENES.clear()
+    _READY.clear()
+
+
+def _keep(cache: OrderedDict[Any, Any], key: Any, value: Any) -> None:
+    cache[key] = value
+    while len(cache) > KEPT_SCENES:
+        cache.popitem(last=False)
+
+
+def _read_only(info: SceneInfo) -> SceneInfo:
+    """``info`` with the arrays of its fruit read-only: shared by the episodes of one scene,
+    which read them only (a write raises, rather than changing the next episode's truth)."""
+    for fruit in info.fruits:
+        for value in vars(fruit).values():
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
+    return info
+
+
+def _compiled_scene(
+    s: Settings, kin: ArmKinematics, seed: int, scene_ss: np.random.SeedSequence, leaves: bool
+) -> tuple[mujoco.MjModel, SceneInfo]:
+    """The seeded scene, compiled; the same model object for the same scene settings and seed
+    as one of the last :data:`KEPT_SCENES` episodes of this process."""
+    key: _SceneKey = (s.robot, s.scene, s.camera, seed, leaves)
+    kept = _SCENES.get(key)
+    if kept is None:
+        spec, info = build_scene(kin, s.scene, np.random.default_rng(scene_ss), s.camera, leaves=leaves)
+        kept = (spec.compile(), _read_only(info))
+        _keep(_SCENES, key, kept)
+    _SCENES.move_to_end(key)
+    return kept
+
+
+def _ready_pose(
+    s: Settings, kin: ArmKinematics, estimate: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
+    """:func:`_start_configuration` for the episode's estimate, remembered with the state it
+    leaves ``rng`` in (a pure function of its inputs: the same bits either way)."""
+    upright = s.planner.upright > 0.0
+    key = (s.robot, estimate.tobytes(), s.band_distance_m, upright, repr(rng.bit_generator.state))
+    kept = _READY.get(key)
+    if kept is None:
+        q = _start_configuration(kin, estimate, s.band_distance_m, rng, upright=upright)
+        _keep(_READY, key, (q, rng.bit_generator.state))
+    else:
+        q, rng.bit_generator.state = kept
+    _READY.move_to_end(key)
+    return q.copy()
 
 
 def _start_configuration(
@@ -181,22 +260,23 @@ def start_episode(
         noise.check_camera(s.camera, s.measurement.noise_model)
     scene_ss, prior_ss, sensor_ss, planner_ss, fault_ss = np.random.SeedSequence(seed).spawn(5)
     kin = arm_kinematics(s.robot.name, s.robot.limit_set)
-    spec, info = build_scene(
-        kin, s.scene, np.random.default_rng(scene_ss), s.camera,
-        target=target, distractors=distractors, leaves=leaves,
-    )  # fmt: skip
-    if edit is not None:
-        edit(spec)
-    model = spec.compile()
+    if target is None and distractors is None and edit is None:
+        model, info = _compiled_scene(s, kin, seed, scene_ss, leaves)
+    else:  # a scripted scene: built for this episode alone
+        spec, info = build_scene(
+            kin, s.scene, np.random.default_rng(scene_ss), s.camera,
+            target=target, distractors=distractors, leaves=leaves,
+        )  # fmt: skip
+        if edit is not None:
+            edit(spec)
+        model = spec.compile()
     prior_rng = np.random.default_rng(prior_ss)
     truth = info.target.centre_m
     coarse = truth + prior_rng.uniform(-ep.initial_error_m, ep.initial_error_m, 3)
     cube = Belief.isotropic(coarse, max(ep.initial_error_m / math.sqrt(3.0), 1e-3))
     streams = (sensor_ss, planner_ss, fault_ss)
     try:
-        q_start = _start_configuration(
-            kin, coarse, s.band_distance_m, prior_rng, upright=s.planner.upright > 0.0
-        )
+        q_start = _ready_pose(s, kin, coarse, prior_rng)
     except PlanningError:  # the fruit is out of the arm's reach: a clear outcome, not a crash
         return EpisodeStart(s, kin, model, info, None, cube, cube, noise, *streams)
     if ep.prior == "cube":

@@ -72,9 +72,7 @@ def _plant_leaves(
                 continue
             parts = plants.MeshParts()
             parts.add(*mesh[0])
-            for verts, faces in mesh[1:]:
-                if _in_view_cone(verts, target).any() or solids.inside(verts, 0.003).any():
-                    continue
+            for verts, faces in _clear_leaflets(mesh[1:], target, solids):
                 parts.add(verts, faces)
             shade = rng.uniform(0.8, 1.15)
             yellowing = max(0.0, 0.25 - 0.2 * (z - z_from)) * rng.uniform(0.0, 1.0)
@@ -83,6 +81,21 @@ def _plant_leaves(
             break
         z += rng.uniform(0.05, 0.08) / max(density, 1e-6)
     return out
+
+
+def _clear_leaflets(
+    leaflets: list[tuple[np.ndarray, np.ndarray]], target: Fruit, solids: _Solids
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The leaflets none of whose vertices lies in the target's view cone or within 3 mm of
+    a fruit: every vertex of the leaf tested at once (the same test, point by point, as one
+    leaflet at a time; ~10x fewer calls)."""
+    if not leaflets:
+        return []
+    verts = np.concatenate([v for v, _ in leaflets])
+    blocked = _in_view_cone(verts, target) | solids.inside(verts, 0.003)
+    first = np.cumsum([0, *(len(v) for v, _ in leaflets[:-1])])
+    hit = np.logical_or.reduceat(blocked, first)
+    return [leaf for leaf, h in zip(leaflets, hit, strict=True) if not h]
 
 
 def _compound_leaf(
@@ -113,6 +126,7 @@ def _compound_leaf(
         return p, tangent, lateral
 
     pairs = int(rng.integers(2, 5))
+    leaflets: list[plants.Leaflet] = []  # made together at the end, in this order
     for k in range(pairs):
         at = 0.30 + 0.58 * k / max(pairs - 1, 1) if pairs > 1 else 0.6
         p, tangent, lateral = frame(at)
@@ -121,8 +135,8 @@ def _compound_leaf(
             alpha = math.radians(rng.uniform(45.0, 75.0))
             axis = math.cos(alpha) * tangent + math.sin(alpha) * sgn * lateral - rng.uniform(0.1, 0.4) * _UP
             up = _UP - sgn * rng.uniform(0.2, 0.5) * lateral
-            meshes.append(
-                plants.leaflet(
+            leaflets.append(
+                plants.Leaflet(
                     p + 0.004 * axis,
                     axis,
                     up,
@@ -137,14 +151,14 @@ def _compound_leaf(
             for sgn in (1.0, -1.0):
                 small = rng.uniform(0.018, 0.032)
                 axis = tangent2 + 1.4 * sgn * lateral2 - 0.3 * _UP
-                meshes.append(
-                    plants.leaflet(p2, axis, _UP, small, small * 0.55, fold=0.2, droop=0.1, segments=6)
+                leaflets.append(
+                    plants.Leaflet(p2, axis, _UP, small, small * 0.55, fold=0.2, droop=0.1, segments=6)
                 )
     tip, tangent, _ = frame(1.0)
     size = rng.uniform(0.06, 0.10)
-    meshes.append(
-        plants.leaflet(
+    leaflets.append(
+        plants.Leaflet(
             tip, tangent - 0.2 * _UP, _UP, size, size * rng.uniform(0.45, 0.6), fold=0.25, droop=0.15
         )
     )
-    return pts, meshes
+    return pts, meshes + plants.leaflet_meshes(leaflets)

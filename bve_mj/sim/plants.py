@@ -16,17 +16,21 @@ two variables solved by Newton's method (:func:`contact_distance`).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cache
+from typing import NamedTuple
 
 import numpy as np
 
 __all__ = [
+    "Leaflet",
     "MeshParts",
     "calyx",
     "contact_distance",
     "ellipsoid_shape",
     "leaflet",
+    "leaflet_meshes",
     "rotation_zx",
     "smooth_path",
     "tube",
@@ -159,12 +163,22 @@ def _tube_faces(rings: int, sides: int) -> np.ndarray:
     return out
 
 
-def _two_sided(
-    top: np.ndarray, faces: np.ndarray, normal: np.ndarray, thickness: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """A thin sheet drawn from both sides: the top surface and a reversed copy below it."""
-    bottom = top - thickness * normal
-    return np.vstack([top, bottom]), np.vstack([faces, faces[:, ::-1] + len(top)])
+class Leaflet(NamedTuple):
+    """An ovate, serrated leaflet from ``base`` along ``axis``, its upper side towards ``up``.
+
+    ``fold``: angle [rad] the halves fall away from the midrib; ``droop``: the tip's drop as a
+    share of the length; ``serration``: depth of the teeth as a share of the half-width.
+    """
+
+    base: np.ndarray
+    axis: np.ndarray
+    up: np.ndarray
+    length: float
+    width: float
+    fold: float = 0.3
+    droop: float = 0.15
+    serration: float = 0.12
+    segments: int = 10
 
 
 def leaflet(
@@ -179,25 +193,68 @@ def leaflet(
     serration: float = 0.12,
     segments: int = 10,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """An ovate, serrated leaflet from ``base`` along ``axis``, its upper side towards ``up``.
+    """One :class:`Leaflet`'s two-sided mesh (see :func:`leaflet_meshes`)."""
+    return leaflet_meshes([Leaflet(base, axis, up, length, width, fold, droop, serration, segments)])[0]
 
-    ``fold``: angle [rad] the halves fall away from the midrib; ``droop``: the tip's drop as a
-    share of the length; ``serration``: depth of the teeth as a share of the half-width.
-    """
-    u = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    w = np.asarray(up, dtype=float) - (np.asarray(up, dtype=float) @ u) * u
-    w /= np.linalg.norm(w)
-    v = _cross(w, u)
+
+_SIGN = np.array([0.0, 1.0, -1.0])[:, None]  # the midrib, the left (+v) and right edges
+
+
+def leaflet_meshes(leaflets: Sequence[Leaflet]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The two-sided meshes (vertices, triangles) of ``leaflets``, in order: those with the
+    same number of segments computed together, each vertex by the same arithmetic as one
+    leaflet alone (the same bits; a compound leaf's ~10 leaflets at the cost of ~2)."""
+    frames = []
+    for leaf in leaflets:  # each leaflet's frame: u along it, w its upper side, v to its left
+        u = np.asarray(leaf.axis, dtype=float) / np.linalg.norm(leaf.axis)
+        up = np.asarray(leaf.up, dtype=float)
+        w = up - (up @ u) * u
+        w /= np.linalg.norm(w)
+        frames.append((u, _cross(w, u), w))
+    out: list[tuple[np.ndarray, np.ndarray] | None] = [None] * len(leaflets)
+    for segments in sorted({leaf.segments for leaf in leaflets}):
+        idx = [i for i, leaf in enumerate(leaflets) if leaf.segments == segments]
+        group = [leaflets[i] for i in idx]
+        t, shape, teeth, t2 = _leaflet_profile(segments)
+        length = np.array([leaf.length for leaf in group])
+        width = np.array([leaf.width for leaf in group])
+        half = (0.5 * width)[:, None] * shape
+        half *= 1.0 - np.array([leaf.serration for leaf in group])[:, None] * teeth
+        rib_drop = (-np.array([leaf.droop for leaf in group]) * length)[:, None] * t2
+        along = (length[:, None] * t)[:, None, :] + (0.04 * length)[:, None, None] * (_SIGN != 0.0)
+        lateral = _SIGN * half[:, None, :]
+        tan_fold = np.array([math.tan(leaf.fold) for leaf in group])
+        height = rib_drop[:, None, :] - (tan_fold[:, None] * half)[:, None, :] * np.abs(_SIGN)
+        u, v, w = (np.array([frames[i][k] for i in idx])[:, None, None, :] for k in range(3))
+        base = np.array([np.asarray(leaf.base, dtype=float) for leaf in group])[:, None, None, :]
+        top = (base + along[..., None] * u + lateral[..., None] * v + height[..., None] * w).reshape(
+            len(group), -1, 3
+        )
+        bottom = top - (0.0004 * w[:, 0])
+        faces = _two_sided_faces(segments)
+        for k, i in enumerate(idx):
+            out[i] = (np.vstack([top[k], bottom[k]]), faces)
+    return [m for m in out if m is not None]
+
+
+@cache
+def _leaflet_profile(segments: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Along a leaflet of ``segments`` spans: the stations t in [0, 1], the half-width's shape,
+    the teeth (every other station) and t² (read-only, shared)."""
     t = np.linspace(0.0, 1.0, segments + 1)
-    half = 0.5 * width * np.sin(math.pi * t**0.75) ** 0.8
-    half *= 1.0 - serration * (np.arange(segments + 1) % 2)
-    rib_drop = -droop * length * t**2
-    sign = np.array([0.0, 1.0, -1.0])[:, None]  # the midrib, the left (+v) and right edges
-    along = length * t + (0.04 * length * (sign != 0.0))
-    lateral = sign * half
-    height = rib_drop - math.tan(fold) * half * np.abs(sign)
-    pts = base + along[..., None] * u + lateral[..., None] * v + height[..., None] * w
-    return _two_sided(pts.reshape(-1, 3), _leaflet_faces(segments), w, 0.0004)
+    out = (t, np.sin(math.pi * t**0.75) ** 0.8, (np.arange(segments + 1) % 2).astype(float), t**2)
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
+@cache
+def _two_sided_faces(segments: int) -> np.ndarray:
+    """A leaflet's triangles, top and (reversed) bottom (read-only, shared)."""
+    faces = _leaflet_faces(segments)
+    out = np.vstack([faces, faces[:, ::-1] + 3 * (segments + 1)])
+    out.flags.writeable = False
+    return out
 
 
 @cache

@@ -13,7 +13,9 @@ import os
 import subprocess
 import sys
 import threading
+from collections import OrderedDict
 from collections.abc import Callable
+from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
@@ -108,6 +110,47 @@ def _make_context(model: mujoco.MjModel, shadows: bool) -> mujoco.MjrContext:
         quality.shadowsize = kept
 
 
+@dataclass
+class _Shared:
+    """A model's render context and the renderers drawing with it."""
+
+    model: mujoco.MjModel  # kept alive while its context is: the id in the key stays its own
+    ctx: mujoco.MjrContext
+    users: int = 0
+
+
+_GlKey = tuple[int, int, int, int]
+_SHARED: OrderedDict[tuple[int, bool, _GlKey], _Shared] = OrderedDict()
+IDLE_CONTEXTS = 2
+"""Render contexts kept, per GL context, after their last renderer closed. A model's context
+(its meshes and textures uploaded, its buffers) costs ~0.05 s to make on a software
+renderer; the episodes of a campaign that share one compiled scene
+(:data:`bve_mj.loop.start.KEPT_SCENES`) make it once."""
+
+
+def _acquire(model: mujoco.MjModel, shadows: bool, gl_key: _GlKey) -> mujoco.MjrContext:
+    """The model's render context in the current GL context (made, or the one kept)."""
+    key = (id(model), shadows, gl_key)
+    entry = _SHARED.get(key)
+    if entry is None or entry.model is not model:
+        entry = _Shared(model, _make_context(model, shadows))
+        _SHARED[key] = entry
+    _SHARED.move_to_end(key)
+    entry.users += 1
+    return entry.ctx
+
+
+def _release(ctx: mujoco.MjrContext, gl_key: _GlKey) -> None:
+    """A renderer is done with ``ctx``; idle contexts beyond :data:`IDLE_CONTEXTS` of this GL
+    context (which is current) are freed, the least recently used first."""
+    for entry in _SHARED.values():
+        if entry.ctx is ctx:
+            entry.users -= 1
+    idle = [k for k, e in _SHARED.items() if e.users <= 0 and k[2] == gl_key]
+    for key in idle[: max(len(idle) - IDLE_CONTEXTS, 0)]:
+        _SHARED.pop(key).ctx.free()
+
+
 class OffscreenRenderer:
     """Renders one of a model's cameras into RGB arrays (H, W, 3) uint8.
 
@@ -137,7 +180,8 @@ class OffscreenRenderer:
             )
         self._model = model
         self._gl = _context(width, height)
-        self._ctx = _make_context(model, shadows)
+        self._gl_key: _GlKey = (os.getpid(), threading.get_ident(), width, height)
+        self._ctx = _acquire(model, shadows, self._gl_key)
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._ctx)
         self._scene = mujoco.MjvScene(model, maxgeom=2000)
         self._scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = shadows
@@ -206,14 +250,15 @@ class OffscreenRenderer:
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._ctx)
 
     def close(self) -> None:
-        """Free this renderer's GL resources (also done when it is garbage-collected).
+        """Release this renderer's GL resources (also done when it is garbage-collected).
 
-        Its MjrContext (the model's meshes and textures, its buffers) is freed in the GL
-        context it was made in; that context stays, for the thread's next renderer."""
+        Its MjrContext (the model's meshes and textures, its buffers) is kept for the next
+        renderer of the same model object, up to :data:`IDLE_CONTEXTS` idle ones, and freed
+        in the GL context it was made in; that context stays, for the thread's next renderer."""
         if getattr(self, "_ctx", None) is None:
             return
         self._gl.make_current()
-        self._ctx.free()
+        _release(self._ctx, self._gl_key)
         self._ctx = None
 
     def __del__(self) -> None:  # pragma: no cover - best effort
