@@ -211,6 +211,62 @@ def test_a_detection_never_seen_again_is_deleted_after_the_views_planned_for_it(
     assert tracker.tracks == []
 
 
+def test_views_planned_for_a_track_of_one_viewpoint_count_even_where_it_is_predicted_out_of_view():
+    """From one viewpoint a track's place along its ray is unknown, so is whether a view
+    should see it: each view planned for it that misses it counts (``ripe_truss`` 601185105
+    planned 5 of 16 views for one, two of them predicted not to see its mean). A track two
+    viewpoints place (triangulated) counts only the views predicted to see it."""
+    fruit = np.array([0.45, 0.0, 0.3])
+    cfg = TrackingConfig(fruits="all", zone_m=0.2, delete_misses=2)
+    views = _views(9)
+    p_away = np.array([0.45, 0.6, 0.3])  # beside the fruit, looking away from it
+    R_away = camera_rotation(p_away, p_away + np.array([0.0, 1.0, 0.0]))
+    tracker = Tracker(cfg, fruit, (0.03, 0.003), UPDATE, _visible())
+    p, R = views[0]
+    tracker.step([Sighting(_z(fruit, 0.03, p, R), _model(p, R))], _model(p, R), 0)
+    (track,) = tracker.tracks
+    assert not tracker.predicted_visible(_model(p_away, R_away))[0]
+    tracker.step([], _model(p_away, R_away), 1, planned_for=track.id)
+    assert track.failed == 1 and track.misses == 0
+    tracker.step([], _model(p_away, R_away), 2, planned_for=track.id)
+    assert tracker.tracks == [] and tracker.dropped == [track]
+    # two viewpoints: a view planned for it that could not see it is no evidence
+    tracker = Tracker(cfg, fruit, (0.03, 0.003), UPDATE, _visible())
+    for v in (0, 8):
+        p, R = views[v]
+        tracker.step([Sighting(_z(fruit, 0.03, p, R), _model(p, R))], _model(p, R), v)
+    (track,) = tracker.tracks
+    tracker.step([], _model(p_away, R_away), 9, planned_for=track.id)
+    assert track.failed == 0
+
+
+def test_a_known_fruit_mismeasured_starts_no_track_and_a_neighbour_does():
+    """A detection of a confirmed fruit placed to within its radius, its outline fitted a fifth
+    of a radius off (a part hidden) and outside the track's gate, is that fruit mismeasured:
+    ignored, no new track (a tentative one's starts a track). A detection of a touching
+    neighbour, two radii off in the image, starts one."""
+    fruit, r = np.array([0.45, 0.0, 0.3]), 0.03
+    views = _views(9)
+    p, R = views[2]
+    z = _z(fruit, r, p, R)
+    off = z + np.array([0.2 * math.tan(z[2]), 0.0, 0.0])  # a fifth of its apparent radius aside
+    for confirming in ((), (4,)):
+        tracker = Tracker(TrackingConfig(fruits="all", zone_m=0.2), fruit, (r, 0.003), UPDATE, _visible())
+        for v in (0, 8, *confirming):
+            q, Rq = views[v]
+            tracker.step([Sighting(_z(fruit, r, q, Rq), _model(q, Rq))], _model(q, Rq), v)
+        (track,) = tracker.tracks
+        assert track.triangulated and track.confirmed == bool(confirming)
+        if not confirming:  # two viewpoints may place it wrong: the detection starts a track
+            assert len(tracker.step([Sighting(off, _model(p, R))], _model(p, R), 10).started) == 1
+    step = tracker.step([Sighting(off, _model(p, R))], _model(p, R), 10)
+    assert step.assigned == () and step.started == () and step.ignored == (0,)
+    assert tracker.tracks == [track]
+    neighbour = fruit + 2.02 * r * np.array([0.0, 1.0, 0.0])
+    step = tracker.step([Sighting(_z(neighbour, r, p, R), _model(p, R))], _model(p, R), 11)
+    assert len(step.started) == 1 and len(tracker.tracks) == 2
+
+
 def test_a_fruit_two_views_place_to_within_its_radius_is_kept_through_misses_until_confirmed():
     """A tentative track from two views whose rays cross at the fruit (3σmax ≤ r̂) is not
     deleted by the misses that delete a track of one view (the detector refuses a fruit

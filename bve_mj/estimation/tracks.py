@@ -12,18 +12,21 @@ centre and radius), and per view:
 2. **updates** each assigned track with its detection (the filter's update, the view
    counted as the share of a fresh view it adds beside the track's earlier views when a view
    correlation is given);
-3. **starts** a track from each detection left over whose fruit lies in the work zone: its
-   bearing fixes the centre's direction, its apparent size with the fruit type's radius
+3. **starts** a track from each detection left over whose fruit lies in the work zone (and
+   that is no confirmed fruit mismeasured: :func:`~bve_mj.estimation.assignment.mismeasured`):
+   its bearing fixes the centre's direction, its apparent size with the fruit type's radius
    prior the range, so the belief is wide along the ray (:func:`belief_from_detection`);
 4. **counts a miss** for each track predicted visible (in the image, its outline not hidden
    by another track's: :mod:`bve_mj.estimation.visibility`) that got no detection; a track
    is confirmed once its detections come from ``confirm_hits`` viewpoints (two detections of
    one view, merged, are one view's evidence; so are views within :data:`SAME_VIEWPOINT_M`
    of each other: ``ripe_truss`` 4234827545 confirmed a track 47 mm off a fruit from three
-   views of one held camera), and deleted when, never confirmed, the
-   views planned to see it missed it ``delete_misses`` times, or any views did three times
-   that often (a false detection is not seen again; a real fruit the detector refuses from
-   a poor view is, from a good one). A track whose detections from two views or more place
+   views of one held camera), and deleted when, never confirmed, the views planned to see it
+   missed it ``delete_misses`` times (predicted visible, or whatever the prediction where
+   one viewpoint saw it: where it lies along its ray is unknown, and ``ripe_truss``
+   601185105 planned 5 of 16 views for one such), or any views did three times that often
+   (a false detection is not seen again; a real fruit the detector refuses from a poor view
+   is, from a good one). A track whose detections from two views or more place
    it to within its radius (3σmax ≤ r̂: their rays cross there) is not deleted for misses:
    something stands there, and a fruit behind its neighbours is refused from most views
    (``ripe_truss`` 4203080826: the target, seen from two views to 0.3 mm, was deleted after
@@ -33,13 +36,11 @@ centre and radius), and per view:
    counted twice; they are merged when they agree (χ² of the difference of their states,
    ``merge_probability``) and, for two confirmed tracks, their centres lie closer than a
    fruit's radius. Two tentative tracks of one fruit are two rays that cross at it (each
-   long along its ray), so for them agreement alone decides; two with a view in common are two
-   things in one image, whose rays from one camera agree near it and cross nowhere: they
-   never merge by agreement. Two tracks whose centres lie
-   closer than a fruit's radius are one fruit whatever their beliefs say (two fruit cannot
-   overlap): when they disagree, the one with more detections stays as it is.
-
-A fruit hidden behind a nearer one is predicted hidden and not counted as missed.
+   long along its ray), so for them agreement alone decides; two with a view in common are
+   two things in one image, whose rays from one camera agree near it and cross nowhere: they
+   never merge by agreement. Two tracks whose centres lie closer than a fruit's radius are
+   one fruit whatever their beliefs say (fruit cannot overlap): when they disagree, the one
+   with more detections stays as it is.
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ import numpy as np
 
 from bve_mj.config import TrackingConfig
 from bve_mj.errors import EstimationError
-from bve_mj.estimation.assignment import Sighting, assign, belief_from_detection
+from bve_mj.estimation.assignment import Sighting, assign, belief_from_detection, mismeasured
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.ekf import UpdateResult, nis_threshold
 from bve_mj.estimation.models import BearingSizeModel
@@ -149,8 +150,8 @@ class ViewTracking:
     Attributes:
         assigned: (detection index, track id) pairs.
         started: (detection index, track id) pairs: the tracks started from detections.
-        ignored: detection indices neither assigned nor started (outside the work zone, or
-            within another track's gate but not assigned to it).
+        ignored: detection indices neither assigned nor started (outside the work zone,
+            within another track's gate but not assigned to it, or a known fruit mismeasured).
         expected: track ids predicted visible in this view.
         events: every :class:`TrackEvent` in order.
         assign_s: wall time of the association alone (the NIS of every track and detection
@@ -258,8 +259,10 @@ class Tracker:
             t.expected += 1
             if t.id not in got:
                 t.misses += 1
-                t.failed += t.id == planned_for
                 events.append(TrackEvent("missed", t.id))
+        aimed = next((t for t in tracks if t.id == planned_for and t.id not in got), None)
+        if aimed is not None and (aimed.id in {e.id for e in expected} or len(aimed.viewpoints) < 2):
+            aimed.failed += 1
         gate = nis_threshold(cfg.gate_probability, 3)
         started: list[tuple[int, int]] = []
         ignored: list[int] = []
@@ -267,7 +270,8 @@ class Tracker:
             if j in done:
                 continue
             gated = nis.shape[0] > 0 and bool(np.any(nis[:, j] <= gate))
-            fresh = None if gated else self._start(s, view)
+            known = mismeasured(s, [t.belief for t in self.tracks if t.confirmed and t.triangulated])
+            fresh = None if gated or known else self._start(s, view)
             if fresh is None:
                 ignored.append(j)
                 continue
@@ -383,14 +387,9 @@ class Tracker:
 
     def snapshot(self) -> tuple[Track, ...]:
         """Copies of the tracks (for records: later views do not change them)."""
+        copies = {"innovations": list, "directions": list, "views": set, "viewpoints": list}
         return tuple(
-            dataclasses.replace(
-                t,
-                innovations=list(t.innovations),
-                directions=list(t.directions),
-                views=set(t.views),
-                viewpoints=list(t.viewpoints),
-            )
+            dataclasses.replace(t, **{k: make(getattr(t, k)) for k, make in copies.items()})
             for t in self.tracks
         )
 

@@ -24,7 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from bve_mj.config import TrackingConfig
-from bve_mj.estimation.assignment import Sighting
+from bve_mj.estimation.assignment import Sighting, image_offset
 from bve_mj.estimation.ekf import nis_threshold
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.tracks import Track
@@ -133,12 +133,9 @@ def explained_in_view(sighting: Sighting, tracks: Sequence[Track]) -> bool:
     centre of its circle within :data:`IN_VIEW_SHARE` of a track's apparent radius of that
     track's image (a tracked fruit partly hidden in one view is no new fruit; a fruit whose
     centre hides behind a tracked one's middle shows too little to count anyway)."""
-    m = sighting.model
     for t in tracks:
-        if not 0.0 < t.radius_m < float(np.linalg.norm(t.centre_m - m.p_world_camera)):
-            continue  # no apparent size: a radius not > 0, or the camera inside the fruit
-        u, v, alpha = m.predict(t.belief.mean)  # a fruit behind the camera lands far off
-        if math.hypot(sighting.z[0] - u, sighting.z[1] - v) < IN_VIEW_SHARE * math.tan(alpha):
+        offset = image_offset(sighting, t.belief)
+        if offset is not None and offset[0] < IN_VIEW_SHARE:
             return True
     return False
 
