@@ -29,7 +29,6 @@ __all__ = [
     "calyx",
     "contact_distance",
     "ellipsoid_shape",
-    "leaflet",
     "leaflet_meshes",
     "rotation_zx",
     "smooth_path",
@@ -164,7 +163,9 @@ def _tube_faces(rings: int, sides: int) -> np.ndarray:
 
 
 class Leaflet(NamedTuple):
-    """An ovate, serrated leaflet from ``base`` along ``axis``, its upper side towards ``up``.
+    """An ovate, serrated leaflet from ``base`` along ``axis``, its upper side towards ``up``
+    (world frame), ``length`` and ``width`` [m], ``segments`` spans from base to tip; its mesh
+    is made by :func:`leaflet_meshes`.
 
     ``fold``: angle [rad] the halves fall away from the midrib; ``droop``: the tip's drop as a
     share of the length; ``serration``: depth of the teeth as a share of the half-width.
@@ -179,22 +180,6 @@ class Leaflet(NamedTuple):
     droop: float = 0.15
     serration: float = 0.12
     segments: int = 10
-
-
-def leaflet(
-    base: np.ndarray,
-    axis: np.ndarray,
-    up: np.ndarray,
-    length: float,
-    width: float,
-    *,
-    fold: float = 0.3,
-    droop: float = 0.15,
-    serration: float = 0.12,
-    segments: int = 10,
-) -> tuple[np.ndarray, np.ndarray]:
-    """One :class:`Leaflet`'s two-sided mesh (see :func:`leaflet_meshes`)."""
-    return leaflet_meshes([Leaflet(base, axis, up, length, width, fold, droop, serration, segments)])[0]
 
 
 _SIGN = np.array([0.0, 1.0, -1.0])[:, None]  # the midrib, the left (+v) and right edges
