@@ -603,3 +603,23 @@ def test_the_every_fruit_table_reports_the_claimed_radius_nees():
     assert summary["radius_nees_mean"] == pytest.approx(3.0)
     head, _, line, _ = format_fruit_suite({"truss": summary})
     assert "r NEES" in head and "3.00" in line.split()
+
+
+def test_planners_compared_in_one_pool_give_each_planners_own_suite():
+    """``--planners``: every planner on each seed in turn (one scene built per seed) gives
+    each planner the rows its own suite gives, in run order."""
+    from bve_mj.campaigns.fruit_suite import run_fruit_suite, run_fruit_suites
+    from bve_mj.campaigns.scenarios import Scenario, suite_dir
+    from bve_mj.errors import ConfigError
+
+    def stable(rows):
+        return [{k: v for k, v in r.items() if not k.endswith(("_ms", "wall_s"))} for r in rows]
+
+    sc = [Scenario("plant_trusses", suite_dir() / "plant_trusses.toml", "")]
+    together = run_fruit_suites(sc, ("bve", "random"), seeds=2, seed=31)
+    for planner in ("bve", "random"):
+        alone = run_fruit_suite(sc, seeds=2, seed=31, planner=planner)
+        assert [r["run"] for r in together[planner].rows["plant_trusses"]] == [0, 1]
+        assert stable(together[planner].rows["plant_trusses"]) == stable(alone.rows["plant_trusses"])
+    with pytest.raises(ConfigError, match="planners"):
+        run_fruit_suites(sc, ("bve", "bve"), seeds=1)

@@ -21,14 +21,21 @@ from typing import Any, get_args
 
 import numpy as np
 
+from bve_mj.campaigns.executors import local_batches
 from bve_mj.campaigns.runs import radius_metrics
-from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario, crashed_rows, run_chunk, run_rows
+from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario, crashed_rows, run_chunk
 from bve_mj.campaigns.spec import episode_seed
 from bve_mj.config import PlannerKind, Settings, with_overrides
 from bve_mj.errors import BveError, ConfigError
 from bve_mj.estimation.belief import Belief
 
-__all__ = ["FruitSuiteResult", "compare_fruit_planners", "format_fruit_suite", "run_fruit_suite"]
+__all__ = [
+    "FruitSuiteResult",
+    "compare_fruit_planners",
+    "format_fruit_suite",
+    "run_fruit_suite",
+    "run_fruit_suites",
+]
 
 LOCALISED_MM = 5.0
 """A ripe fruit counts as localised when a localised track lies within this of it [mm]."""
@@ -169,21 +176,84 @@ def run_fruit_suite(
     """Run ``seeds`` every-fruit episodes of every scenario (camera measurement, the radius in
     the state: the files' measurement and state are overridden; ``planner``: the planner for
     every scenario, default each file's)."""
+    if planner is not None and planner not in get_args(PlannerKind):
+        raise ConfigError("planner", planner, f"one of {', '.join(get_args(PlannerKind))}")
+    runs = run_fruit_suites(scenarios, (planner,), seeds=seeds, seed=seed, workers=workers, progress=progress)
+    return runs[planner]
+
+
+def run_fruit_suites(
+    scenarios: Sequence[Scenario],
+    planners: Sequence[PlannerKind | None],
+    *,
+    seeds: int = 20,
+    seed: int = 0,
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict[PlannerKind | None, FruitSuiteResult]:
+    """:func:`run_fruit_suite` for each of ``planners`` (None: each file's) on the same seeds,
+    in one pool: a task runs a few runs of one scenario, every planner on each run in turn,
+    so the worker builds each run's scene once (:data:`bve_mj.loop.start.KEPT_SCENES`). Each
+    result's ``wall_s`` is the whole comparison's."""
     for name, value, lo in (("seeds", seeds, 1), ("seed", seed, 0), ("workers", workers, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < lo:
             raise ConfigError(name, value, f"an integer >= {lo}")
-    if planner is not None and planner not in get_args(PlannerKind):
-        raise ConfigError("planner", planner, f"one of {', '.join(get_args(PlannerKind))}")
+    allowed = get_args(PlannerKind)
+    if (
+        not planners
+        or len(set(planners)) != len(planners)
+        or any(p not in (None, *allowed) for p in planners)
+    ):
+        raise ConfigError("planners", list(planners), f"distinct names from {', '.join(allowed)}")
     t0 = time.perf_counter()
-    chosen: dict[str, dict[str, object]] = {} if planner is None else {"planner": {"kind": planner}}
+    base = {sc.name: sc.settings("camera", None, "centre_radius") for sc in scenarios}
+
+    def chosen(p: PlannerKind | None) -> dict[str, dict[str, object]]:
+        return {} if p is None else {"planner": {"kind": p}}
+
     settings = {
-        sc.name: with_overrides(
-            sc.settings("camera", None, "centre_radius"), tracking={"fruits": "all"}, **chosen
-        )
-        for sc in scenarios
+        name: tuple(with_overrides(s, tracking={"fruits": "all"}, **chosen(p)) for p in planners)
+        for name, s in base.items()
     }
-    rows = run_rows(partial(run_chunk, _run_one), scenarios, settings, seed, seeds, workers, progress)
-    return FruitSuiteResult(tuple(scenarios), rows, seed, seeds, time.perf_counter() - t0)
+    chunk = max(1, min(5, seeds // max(1, 2 * workers)))
+    tasks = [
+        (sc.name, settings[sc.name], seed, tuple(range(start, min(seeds, start + chunk))))
+        for sc in scenarios
+        for start in range(0, seeds, chunk)
+    ]
+    collected: dict[tuple[str, int], list[dict[str, Any]]] = {
+        (sc.name, k): [] for sc in scenarios for k in range(len(planners))
+    }
+    total, done = len(scenarios) * seeds * len(planners), 0
+    if progress is not None:
+        progress(0, total)
+    for batch in local_batches(partial(_run_planners, _run_one), tasks, min(workers, len(tasks))):
+        for row in batch:
+            collected[row["scenario"], row.pop("variant")].append(row)
+        done += len(batch)
+        if progress is not None:
+            progress(done, total)
+    wall = time.perf_counter() - t0
+
+    def rows(k: int) -> dict[str, tuple[dict[str, Any], ...]]:
+        return {sc.name: tuple(sorted(collected[sc.name, k], key=lambda r: r["run"])) for sc in scenarios}
+
+    return {p: FruitSuiteResult(tuple(scenarios), rows(k), seed, seeds, wall) for k, p in enumerate(planners)}
+
+
+def _run_planners(
+    run_one: Callable[[str, Settings, int, int], dict[str, Any]],
+    task: tuple[str, tuple[Settings, ...], int, tuple[int, ...]],
+) -> list[dict[str, Any]]:
+    """Each run of the task with each of its settings in turn (``variant``: the settings'
+    index), as :func:`~bve_mj.campaigns.scenarios.run_chunk` runs one."""
+    name, variants, seed, runs = task
+    return [
+        {**row, "variant": k}
+        for run in runs
+        for k, s in enumerate(variants)
+        for row in run_chunk(run_one, (name, s, seed, (run,)))
+    ]
 
 
 def format_fruit_suite(summaries: dict[str, dict[str, Any]]) -> list[str]:

@@ -85,7 +85,7 @@ def _every_fruit(
     args: argparse.Namespace, suite: list[Any], seeds: int, seed: int, workers: int, json_path: Path | None
 ) -> int:
     """``bve-mj scenarios --fruits all``: every ripe fruit of each scene."""
-    from bve_mj.campaigns.fruit_suite import compare_fruit_planners, format_fruit_suite, run_fruit_suite
+    from bve_mj.campaigns.fruit_suite import compare_fruit_planners, format_fruit_suite, run_fruit_suites
     from bve_mj.campaigns.scenarios import suite_json_clean
     from bve_mj.config import PlannerKind
     from bve_mj.errors import ConfigError
@@ -100,17 +100,18 @@ def _every_fruit(
         planners = [cast("PlannerKind", p) for p in names]
     print(f"bve-mj scenarios --fruits all: {len(suite)} scenarios x {seeds} seeds (base seed {seed})")
     show = not args.quiet and sys.stderr.isatty()
-    results: dict[str, FruitSuiteResult] = {}
-    for planner in planners:
+    # every planner on each seed in turn, in one pool: a worker builds each seed's scene once
+    by_planner = run_fruit_suites(
+        suite, planners, seeds=seeds, seed=seed, workers=workers, progress=progress_printer(show)
+    )
+    results: dict[str, FruitSuiteResult] = {p or "file": r for p, r in by_planner.items()}
+    for planner, result in by_planner.items():
         if planner is not None:
             print(f"planner {planner}:")
-        result = run_fruit_suite(
-            suite, seeds=seeds, seed=seed, workers=workers, planner=planner, progress=progress_printer(show)
-        )
-        results[planner or "file"] = result
         for line in format_fruit_suite({sc.name: result.summary(sc.name) for sc in result.scenarios}):
             print(line)
-        print(f"wall time {result.wall_s:.1f} s")
+    wall_s = next(iter(results.values())).wall_s
+    print(f"wall time {wall_s:.1f} s")
     if len(results) > 1:
         print("paired on seeds:")
         for line in compare_fruit_planners(results, reference=next(iter(results))):
@@ -120,7 +121,7 @@ def _every_fruit(
         doc: dict[str, Any] = {
             "seed": seed,
             "seeds": seeds,
-            "wall_s": sum(r.wall_s for r in results.values()),
+            "wall_s": wall_s,
         }
         doc["scenarios" if planners == [None] else "planners"] = runs.get("file", runs)
         write_json_atomic(json_path, suite_json_clean(doc))
