@@ -143,12 +143,14 @@ def _acquire(model: mujoco.MjModel, shadows: bool, gl_key: _GlKey) -> mujoco.Mjr
 def _release(ctx: mujoco.MjrContext, gl_key: _GlKey) -> None:
     """A renderer is done with ``ctx``; idle contexts beyond :data:`IDLE_CONTEXTS` of this GL
     context (which is current) are freed, the least recently used first."""
-    for entry in _SHARED.values():
+    entries = list(_SHARED.items())  # a snapshot: a renderer collected meanwhile releases too
+    for _, entry in entries:
         if entry.ctx is ctx:
             entry.users -= 1
-    idle = [k for k, e in _SHARED.items() if e.users <= 0 and k[2] == gl_key]
+    idle = [k for k, e in entries if e.users <= 0 and k[2] == gl_key]
     for key in idle[: max(len(idle) - IDLE_CONTEXTS, 0)]:
-        _SHARED.pop(key).ctx.free()
+        if key in _SHARED:
+            _SHARED.pop(key).ctx.free()
 
 
 class OffscreenRenderer:
