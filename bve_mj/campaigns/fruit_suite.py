@@ -21,9 +21,8 @@ from typing import Any, get_args
 
 import numpy as np
 
-from bve_mj.campaigns.executors import local_batches
 from bve_mj.campaigns.runs import radius_metrics
-from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario, crashed_rows, run_chunk
+from bve_mj.campaigns.scenarios import SILENT_NEES, Scenario, crashed_rows, run_chunk, run_rows
 from bve_mj.campaigns.spec import episode_seed
 from bve_mj.config import PlannerKind, Settings, with_overrides
 from bve_mj.errors import BveError, ConfigError
@@ -215,45 +214,12 @@ def run_fruit_suites(
         name: tuple(with_overrides(s, tracking={"fruits": "all"}, **chosen(p)) for p in planners)
         for name, s in base.items()
     }
-    chunk = max(1, min(5, seeds // max(1, 2 * workers)))
-    tasks = [
-        (sc.name, settings[sc.name], seed, tuple(range(start, min(seeds, start + chunk))))
-        for sc in scenarios
-        for start in range(0, seeds, chunk)
-    ]
-    collected: dict[tuple[str, int], list[dict[str, Any]]] = {
-        (sc.name, k): [] for sc in scenarios for k in range(len(planners))
-    }
-    total, done = len(scenarios) * seeds * len(planners), 0
-    if progress is not None:
-        progress(0, total)
-    for batch in local_batches(partial(_run_planners, _run_one), tasks, min(workers, len(tasks))):
-        for row in batch:
-            collected[row["scenario"], row.pop("variant")].append(row)
-        done += len(batch)
-        if progress is not None:
-            progress(done, total)
+    by_variant = run_rows(partial(run_chunk, _run_one), scenarios, settings, seed, seeds, workers, progress)
     wall = time.perf_counter() - t0
-
-    def rows(k: int) -> dict[str, tuple[dict[str, Any], ...]]:
-        return {sc.name: tuple(sorted(collected[sc.name, k], key=lambda r: r["run"])) for sc in scenarios}
-
-    return {p: FruitSuiteResult(tuple(scenarios), rows(k), seed, seeds, wall) for k, p in enumerate(planners)}
-
-
-def _run_planners(
-    run_one: Callable[[str, Settings, int, int], dict[str, Any]],
-    task: tuple[str, tuple[Settings, ...], int, tuple[int, ...]],
-) -> list[dict[str, Any]]:
-    """Each run of the task with each of its settings in turn (``variant``: the settings'
-    index), as :func:`~bve_mj.campaigns.scenarios.run_chunk` runs one."""
-    name, variants, seed, runs = task
-    return [
-        {**row, "variant": k}
-        for run in runs
-        for k, s in enumerate(variants)
-        for row in run_chunk(run_one, (name, s, seed, (run,)))
-    ]
+    return {
+        p: FruitSuiteResult(tuple(scenarios), rows, seed, seeds, wall)
+        for p, rows in zip(planners, by_variant, strict=True)
+    }
 
 
 def format_fruit_suite(summaries: dict[str, dict[str, Any]]) -> list[str]:

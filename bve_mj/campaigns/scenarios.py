@@ -125,7 +125,8 @@ def load_suite(directory: str | Path | None = None, only: Sequence[str] | None =
 
 
 # --------------------------------------------------------------------------- running
-Task = tuple[str, Settings, int, tuple[int, ...]]
+Task = tuple[str, tuple[Settings, ...], int, tuple[int, ...]]
+"""(scenario, its settings variants, base seed, runs): each run with each variant in turn."""
 
 
 def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, Any]:
@@ -172,20 +173,24 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
 def run_chunk(
     run_one: Callable[[str, Settings, int, int], dict[str, Any]], task: Task
 ) -> list[dict[str, Any]]:
-    """``run_one(name, settings, seed, run)`` for every run of the task, with one BLAS thread
-    (results identical in any process); an exception is a bug: a ``crashed`` row with one line,
-    kept out of the metrics (exit 1)."""
+    """``run_one(name, settings, seed, run)`` for every run of the task with each of its
+    settings variants in turn (a run's episodes one after another share its scene: see
+    :data:`bve_mj.loop.start.KEPT_SCENES`), each row tagged with its variant's index, with one
+    BLAS thread (results identical in any process); an exception is a bug: a ``crashed`` row
+    with one line, kept out of the metrics (exit 1)."""
     from bve_mj.threads import one_blas_thread
 
-    name, settings, seed, runs = task
+    name, variants, seed, runs = task
     with one_blas_thread():
         rows = []
         for run in runs:
-            try:
-                rows.append(run_one(name, settings, seed, run))
-            except Exception as exc:
-                rows.append({"scenario": name, "run": run, "outcome": "crashed",
-                             "message": f"{type(exc).__name__}: {exc}"})  # fmt: skip
+            for k, settings in enumerate(variants):
+                try:
+                    row = run_one(name, settings, seed, run)
+                except Exception as exc:
+                    row = {"scenario": name, "run": run, "outcome": "crashed",
+                           "message": f"{type(exc).__name__}: {exc}"}  # fmt: skip
+                rows.append({**row, "variant": k})
         return rows
 
 
@@ -278,38 +283,41 @@ def run_suite(
         raise ConfigError("measurement", measurement, "camera or range")
     t0 = time.perf_counter()
     settings = {sc.name: sc.settings(measurement, filter_kind, state) for sc in scenarios}
-    rows = run_rows(partial(run_chunk, _run_one), scenarios, settings, seed, seeds, workers, progress)
+    variants: dict[str, tuple[Settings, ...]] = {name: (s,) for name, s in settings.items()}
+    (rows,) = run_rows(partial(run_chunk, _run_one), scenarios, variants, seed, seeds, workers, progress)
     return SuiteResult(tuple(scenarios), settings, rows, seed, seeds, time.perf_counter() - t0)
 
 
 def run_rows(
     run_task: Callable[[Task], list[dict[str, Any]]],
     scenarios: Sequence[Scenario],
-    settings: dict[str, Settings],
+    variants: dict[str, tuple[Settings, ...]],
     seed: int,
     seeds: int,
     workers: int,
     progress: Callable[[int, int], None] | None,
-) -> dict[str, tuple[dict[str, Any], ...]]:
-    """Every scenario's ``seeds`` episodes, in chunks of runs over ``workers`` spawned
-    processes (``run_task`` runs one chunk): each scenario's rows in run order."""
+) -> list[dict[str, tuple[dict[str, Any], ...]]]:
+    """Every scenario's ``seeds`` episodes with each of its settings ``variants`` (as many for
+    every scenario), in chunks of runs over ``workers`` spawned processes (``run_task`` runs
+    one chunk, every variant of a run in turn): per variant, each scenario's rows in run order."""
     chunk = max(1, min(5, seeds // max(1, 2 * workers)))
     tasks: list[Task] = [
-        (sc.name, settings[sc.name], seed, tuple(range(start, min(seeds, start + chunk))))
+        (sc.name, variants[sc.name], seed, tuple(range(start, min(seeds, start + chunk))))
         for sc in scenarios
         for start in range(0, seeds, chunk)
     ]
-    collected: dict[str, list[dict[str, Any]]] = {sc.name: [] for sc in scenarios}
-    total, done = len(scenarios) * seeds, 0
+    n = len(variants[scenarios[0].name]) if scenarios else 1
+    collected: list[dict[str, list[dict[str, Any]]]] = [{sc.name: [] for sc in scenarios} for _ in range(n)]
+    total, done = len(scenarios) * seeds * n, 0
     if progress is not None:
         progress(0, total)
     for batch in local_batches(run_task, tasks, min(workers, len(tasks))):
         for row in batch:
-            collected[row["scenario"]].append(row)
+            collected[row.pop("variant")][row["scenario"]].append(row)
         done += len(batch)
         if progress is not None:
             progress(done, total)
-    return {n: tuple(sorted(r, key=lambda x: x["run"])) for n, r in collected.items()}
+    return [{name: tuple(sorted(r, key=lambda x: x["run"])) for name, r in c.items()} for c in collected]
 
 
 def format_suite(summaries: dict[str, dict[str, Any]], markdown: bool = False) -> list[str]:

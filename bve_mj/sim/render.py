@@ -131,8 +131,8 @@ renderer; the episodes of a campaign that share one compiled scene
 def _acquire(model: mujoco.MjModel, shadows: bool, gl_key: _GlKey) -> mujoco.MjrContext:
     """The model's render context in the current GL context (made, or the one kept)."""
     key = (id(model), shadows, gl_key)
-    entry = _SHARED.get(key)
-    if entry is None or entry.model is not model:
+    entry = _SHARED.get(key)  # its model is this one: kept alive, its id is not reused
+    if entry is None:
         entry = _Shared(model, _make_context(model, shadows))
         _SHARED[key] = entry
     _SHARED.move_to_end(key)
