@@ -177,3 +177,43 @@ def test_a_circle_on_the_image_of_a_fruit_measured_in_the_same_view_is_a_fruit_b
         seen = _tracker(tracking_config(CFG))
         _seen_in_part(seen, [weak], weak.model, 0, tracker, measured, [])
         assert len(seen.tracks) == kept, measured
+
+
+def _exact(centre, p, R):
+    """A weak sighting of a fruit of radius RADIUS at ``centre``: its true circle."""
+    t = R.T @ (np.asarray(centre) - p)
+    r_px = F * math.tan(math.asin(RADIUS / np.linalg.norm(t)))
+    return unmeasured_sighting(t / np.linalg.norm(t), r_px, F, p, R)
+
+
+def test_a_fruit_seen_in_part_that_a_measured_track_proves_its_own_is_forgotten():
+    """A fruit seen in part from two views before it was measured (the target, refused at first)
+    is that fruit once a track places it; kept, its wide belief gates the partial outlines of
+    a neighbour hidden behind it and absorbs them, and the measured track then explains them
+    all away (``ripe_truss`` 67249277 of seed 1357 claimed every fruit with that neighbour
+    missing). Forgotten, the neighbour's outlines make a fruit of their own, unexplained."""
+    from bve_mj.loop.every_fruit import _seen_in_part
+
+    views = _views(5)
+    far = FRUIT - 0.3 * (views[2][0] - FRUIT) / np.linalg.norm(views[2][0] - FRUIT)
+    side = np.cross(FRUIT - views[2][0], [0.0, 0.0, 1.0])
+    neighbour = FRUIT + 2.05 * RADIUS * (0.5 * (far - FRUIT) / 0.3 + 0.87 * side / np.linalg.norm(side))
+    tracker = _tracker(CFG)
+    seen = _tracker(tracking_config(CFG))
+    events = []
+    for i, (p, R) in enumerate(views[:2]):  # the target seen in part, no track yet
+        w = _exact(FRUIT, p, R)
+        _seen_in_part(seen, [w], w.model, i, tracker, set(), events)
+    (early,) = seen.tracks
+    assert early.confirmed and float(np.linalg.norm(early.centre_m - FRUIT)) < RADIUS
+    t = tracker.seed(Belief(np.r_[FRUIT, RADIUS], np.eye(4) * 1e-8), 2)
+    t.viewpoints = [views[0][0], views[1][0]]  # measured from two viewpoints: placed
+    assert t.triangulated
+    found = ()
+    for i, (p, R) in enumerate(views[2:], start=2):  # the target measured, its neighbour seen in part
+        w = _exact(neighbour, p, R)
+        found = _seen_in_part(seen, [w], w.model, i, tracker, {t.id}, events)
+    assert [e.kind for e in events] == ["seen_in_part_settled"]
+    assert all(h is not early for h in seen.tracks)
+    (h,) = found
+    assert float(np.linalg.norm(h.belief.centre_m - neighbour)) < RADIUS

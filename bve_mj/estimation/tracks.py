@@ -39,8 +39,9 @@ centre and radius), and per view:
    long along its ray), so for them agreement alone decides; two with a view in common are
    two things in one image, whose rays from one camera agree near it and cross nowhere: they
    never merge by agreement. Two tracks whose centres lie closer than a fruit's radius are
-   one fruit whatever their beliefs say (fruit cannot overlap): when they disagree, the one
-   with more detections stays as it is.
+   one fruit whatever their beliefs say (fruit cannot overlap): when they disagree, their
+   fused belief is widened by χ²/4 (they differ more than their covariances allow: a bias),
+   or, with a view in common, the one with more detections stays as it is.
 """
 
 from __future__ import annotations
@@ -353,7 +354,8 @@ class Tracker:
                 agree = fused is not None and chi2 <= limit and not (a.views & b.views)
                 if (agree and (close or not both)) or close:
                     keep, drop = (a, b) if (a.hits, -a.id) >= (b.hits, -b.id) else (b, a)
-                    keep.belief = fused if fused is not None and agree else keep.belief
+                    if fused is not None and (agree or not (a.views & b.views)):
+                        keep.belief = fused if agree else Belief(fused.mean, fused.cov * max(chi2 / 4.0, 1.0))
                     keep.hits += drop.hits
                     keep.views |= drop.views
                     for q in drop.viewpoints:

@@ -18,6 +18,7 @@ EventKind = Literal[
     "outlier",  # injected: the measurement got a gross error
     "ik_failure",  # injected: the move's IK failed
     "seen_in_part_reset",  # --fruits all: weak evidence of fruit seen in part broke a belief: restarted
+    "seen_in_part_settled",  # --fruits all: a fruit seen in part proved a measured track's: forgotten
     "zone_unframed",  # --fruits all: a view aimed at a part of the zone not yet framed framed none of it
     "retreated",  # --fruits all: the planner found no view, and the camera drew back towards the aisle
 ]

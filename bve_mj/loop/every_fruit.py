@@ -33,7 +33,7 @@ from bve_mj.estimation.assignment import Sighting
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.tracks import Track, Tracker, ViewTracking
-from bve_mj.estimation.unmeasured import explained_in_view, too_small, unexplained
+from bve_mj.estimation.unmeasured import explained_in_view, settled, too_small, unexplained
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
@@ -338,8 +338,10 @@ def _seen_in_part(
     started it) is not also seen in part in it: a circle on its image is a fruit behind it
     (``truss_cluster`` 1745651037: a hidden fruit seen in part on the target's image in four
     views, each taken for the target, which those views measured, and the episode claimed
-    every fruit). Weak evidence never ends an episode: a belief it breaks (a radius driven
-    through zero) restarts it (event ``seen_in_part_reset``)."""
+    every fruit). One that a measured track shows to be its own fruit is forgotten before
+    the view's evidence is fused (:func:`~bve_mj.estimation.unmeasured.settled`, event
+    ``seen_in_part_settled``). Weak evidence never ends an episode: a belief it breaks (a
+    radius driven through zero) restarts it (event ``seen_in_part_reset``)."""
     r0, sd = tracker.radius_prior
     zone_centre, zone_m = tracker.zone_centre_m, tracker.config.zone_m
     r_min = r0 - math.sqrt(3.0) * sd  # the prior's smallest fruit (uniform ±spread)
@@ -350,6 +352,9 @@ def _seen_in_part(
         if not too_small(w, zone_centre, zone_m, r_min) and not explained_in_view(w, hidden_in_part)
     ]
     try:
+        gone = settled(seen_in_part.tracks, tracker.tracks)  # before this view's evidence: see settled
+        events += [Event("seen_in_part_settled", f"p{h.id} is track {t.id}") for h, t in gone]
+        seen_in_part.tracks[:] = [h for h in seen_in_part.tracks if all(h is not g for g, _ in gone)]
         seen_in_part.step(weak, camera, iteration)
         found = unexplained(seen_in_part.tracks, tracker.tracks, zone_centre, zone_m)
     except (EstimationError, np.linalg.LinAlgError) as exc:
