@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from bve_mj.campaigns.calibration import fruit_images, matched_fruit
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.campaigns.spec import episode_seed
 from bve_mj.config import Settings, with_overrides
@@ -42,12 +43,11 @@ from bve_mj.robot import IkOptions, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.mujoco_world import declared_noise
 from bve_mj.sim.render import OffscreenRenderer
-from bve_mj.sim.scene_model import Fruit, fruit_geom_name
+from bve_mj.sim.scene_model import fruit_geom_name
 from bve_mj.sim.true_boxes import visible_share
 from bve_mj.threads import one_blas_thread
 
 MOSTLY_VISIBLE = 0.55  # 5 of 9 rays
-MATCH_RADII = 0.5
 
 
 @dataclass
@@ -63,23 +63,6 @@ class FruitSeen:
 def _reason(text: str) -> str:
     """A refusal's reason without its numbers ("only 110 deg of ..." -> "only N deg of ...")."""
     return re.sub(r"\d+(\.\d+)?", "N", text.split(":")[0])[:48]
-
-
-def _match(
-    centre_px: np.ndarray, ripe: list[Fruit], p: np.ndarray, R: np.ndarray, intr: Intrinsics
-) -> int | None:
-    """The ripe fruit whose projected centre lies within MATCH_RADII of its apparent radius of
-    ``centre_px`` (the nearest, in those radii), or None."""
-    best, best_d = None, math.inf
-    for k, fr in enumerate(ripe):
-        t = R.T @ (fr.centre_m - p)
-        if t[0] <= fr.radius_m:
-            continue
-        r_px = intr.focal_px * math.tan(math.asin(fr.radius_m / float(np.linalg.norm(t))))
-        d = float(np.linalg.norm(centre_px - intr.project(t))) / r_px
-        if d < best_d:
-            best, best_d = k, d
-    return best if best_d <= MATCH_RADII else None
 
 
 def oracle_episode(settings: Settings, seed: int, views: int) -> list[FruitSeen]:
@@ -131,15 +114,16 @@ def oracle_episode(settings: Settings, seed: int, views: int) -> list[FruitSeen]
                 up_camera=R.T[:, 2], max_range_m=search.tracking.max_range_m,
             )  # fmt: skip
             measured = set()
+            images = fruit_images(ripe, p, R, intr)
             for det in found.detections:
-                k = _match(det.centre_px, ripe, p, R, intr)
-                if k is not None and k not in measured:
-                    seen[k].measured += 1
-                    measured.add(k)
+                m = matched_fruit(det.centre_px, images)
+                if m is not None and m.fruit_index not in measured:
+                    seen[m.fruit_index].measured += 1
+                    measured.add(m.fruit_index)
             for ref in found.refused:
-                k = None if ref.centre_px is None else _match(ref.centre_px, ripe, p, R, intr)
-                if k is not None and k not in measured:
-                    seen[k].refusals[_reason(ref.reason)] += 1
+                m = None if ref.centre_px is None else matched_fruit(ref.centre_px, images)
+                if m is not None and m.fruit_index not in measured:
+                    seen[m.fruit_index].refusals[_reason(ref.reason)] += 1
     finally:
         renderer.close()
     return seen

@@ -31,7 +31,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -45,7 +45,15 @@ if TYPE_CHECKING:
     from bve_mj.perception.detection import Detection, Intrinsics
     from bve_mj.sim.scene_model import Fruit
 
-__all__ = ["CalibrationData", "calibrate", "run_calibration", "sample_views"]
+__all__ = [
+    "CalibrationData",
+    "FruitImage",
+    "calibrate",
+    "fruit_images",
+    "matched_fruit",
+    "run_calibration",
+    "sample_views",
+]
 
 _DISTANCE_M = (0.12, 0.45)  # camera to fruit centre
 _AZIMUTH_DEG = 70.0  # either side of the robot's side of the fruit (-x)
@@ -174,8 +182,44 @@ def _detection_fields(
     }
 
 
-_MATCH_RADII = 0.5  # an every-fruit detection is of the fruit whose centre's image lies this
-# many of its apparent radii from its centre (or nearer); one farther from every fruit is none
+MATCH_RADII = 0.5
+"""A detection (or refusal) is of the fruit whose centre's image lies this many of its apparent
+radii from the detection's centre, or nearer; one farther from every fruit is of none."""
+
+
+class FruitImage(NamedTuple):
+    """A true fruit ahead of the camera, as the camera sees it."""
+
+    fruit_index: int  # in the list of fruit given
+    fruit: Fruit
+    t_camera_m: np.ndarray  # its centre in the camera frame (x optical axis), (3,)
+    distance_m: float
+    centre_px: np.ndarray  # the image of its centre, (2,)
+    radius_px: float  # its apparent radius
+
+
+def fruit_images(
+    fruits: Sequence[Fruit], p_world_camera: np.ndarray, R_world_camera: np.ndarray, intrinsics: Intrinsics
+) -> list[FruitImage]:
+    """The fruit ahead of the camera (centre more than a radius in front of it), as it sees them."""
+    out = []
+    for i, fr in enumerate(fruits):
+        t = R_world_camera.T @ (fr.centre_m - p_world_camera)
+        dist = float(np.linalg.norm(t))
+        if t[0] <= fr.radius_m or dist <= fr.radius_m:
+            continue
+        r_px = intrinsics.focal_px * math.tan(math.asin(fr.radius_m / dist))
+        out.append(FruitImage(i, fr, t, dist, intrinsics.project(t), r_px))
+    return out
+
+
+def matched_fruit(centre_px: np.ndarray, images: Sequence[FruitImage]) -> FruitImage | None:
+    """The fruit a detection centred at ``centre_px`` [px] is of: the one whose centre's image
+    lies nearest, in its apparent radii, within :data:`MATCH_RADII`; None where none does."""
+    if not images:
+        return None
+    best = min(images, key=lambda m: float(np.linalg.norm(centre_px - m.centre_px)) / m.radius_px)
+    return best if float(np.linalg.norm(centre_px - best.centre_px)) <= MATCH_RADII * best.radius_px else None
 
 
 def _every_fruit_rows(
@@ -190,27 +234,13 @@ def _every_fruit_rows(
 ) -> list[dict[str, Any]]:
     """The every-fruit detector's answer in one view (``found``: its
     :class:`~bve_mj.perception.all_fruit.FruitDetections`) as rows: one per detection matched
-    to the true fruit it measured (the one whose image lies nearest its centre, in apparent
-    radii, within :data:`_MATCH_RADII`), and one ``detected: False`` row per fruit that view
-    refused (seen in part, a poor fit ...) and did not measure: the refusal scale needs each
+    to the true fruit it measured (:func:`matched_fruit`), and one ``detected: False`` row per
+    fruit that view refused (seen in part, a poor fit ...) and did not measure: the refusal scale needs each
     fruit's refused share. The view's own fields (scenario, scene, camera) from ``view_row``.
     A detection or refusal of fruit ``exclude`` (the target, which its own rows measure) is
     matched but gives no row: a scene of one fruit would otherwise count it twice."""
     f = intrinsics.focal_px
-    seen = []
-    for i, fr in enumerate(fruits):
-        t = R_world_camera.T @ (fr.centre_m - p_world_camera)
-        dist = float(np.linalg.norm(t))
-        if t[0] <= fr.radius_m or dist <= fr.radius_m:
-            continue
-        r_px = f * math.tan(math.asin(fr.radius_m / dist))
-        seen.append((i, fr, t, dist, intrinsics.project(t), r_px))
-
-    def match(centre_px: np.ndarray) -> tuple[Any, ...] | None:
-        if not seen:
-            return None
-        best = min(seen, key=lambda s: float(np.linalg.norm(centre_px - s[4])) / s[5])
-        return best if float(np.linalg.norm(centre_px - best[4])) <= _MATCH_RADII * best[5] else None
+    seen = fruit_images(fruits, p_world_camera, R_world_camera, intrinsics)
 
     view = {k: view_row[k] for k in ("scenario", "scene_seed", "view", "aim_sigma_m", "fruit_shape_index",
                                      "camera_position_m", "camera_rotation")}  # fmt: skip
@@ -222,16 +252,18 @@ def _every_fruit_rows(
             "shape_index": fr.shape_index, "colour": fr.colour, "truth_m": fr.centre_m.tolist(),
         }  # fmt: skip
 
-    rows, measured, refused = [], set(), set()
+    rows: list[dict[str, Any]] = []
+    measured: set[int] = set()
+    refused: set[int] = set()
     for det in found.detections:
-        m = match(det.centre_px)
-        if m is not None and m[0] != exclude:
+        m = matched_fruit(det.centre_px, seen)
+        if m is not None and m.fruit_index != exclude:
             i, fr, t, dist, _, _ = m
             rows.append({**fruit_fields(i, fr, t, dist), **_detection_fields(det, t, fr.radius_m, f)})
             measured.add(i)
     for ref in found.refused:
-        m = None if ref.centre_px is None else match(ref.centre_px)
-        if m is not None and m[0] not in measured and m[0] not in refused and m[0] != exclude:
+        m = None if ref.centre_px is None else matched_fruit(ref.centre_px, seen)
+        if m is not None and m.fruit_index not in measured | refused and m.fruit_index != exclude:
             i, fr, t, dist, _, _ = m
             rows.append({**fruit_fields(i, fr, t, dist), "detected": False, "reason": ref.reason})
             refused.add(i)
