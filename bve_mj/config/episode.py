@@ -104,10 +104,13 @@ class DetectorConfig:
         default=0.8, metadata=_why("largest rms residual of the silhouette points kept in the fit", "px")
     )
     max_fit_sigma_px: float = field(
-        default=0.5,
+        default=1.0,
         metadata=_why(
-            "largest 1-sigma centre uncertainty of the fit itself (short or ragged arcs), half the "
-            "centre error a measurement claims; a looser fit is refused rather than reported",
+            "largest 1-sigma centre uncertainty of the fit itself (short or ragged arcs: a fruit "
+            "touching ripe neighbours shows no outline against them); a looser fit is refused "
+            "rather than reported, a fit within it measured with its own sigma in the covariance. "
+            "0.5 refused most views of whole fruit in a truss (ripe_truss: 88-95% of ripe fruit "
+            "localised against 97-100% at 1.0)",
             "px",
         ),
     )

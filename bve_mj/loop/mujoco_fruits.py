@@ -26,7 +26,7 @@ from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.estimation import Belief, filter_update
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.tracks import Tracker
-from bve_mj.estimation.unmeasured import tracking_config
+from bve_mj.estimation.unmeasured import in_zone, tracking_config
 from bve_mj.estimation.view_correlation import new_view_share
 from bve_mj.estimation.visibility import visible_arc_deg
 from bve_mj.loop.arm_clearance import (
@@ -336,10 +336,9 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr)
     seen_in_part = Tracker(tracking_config(s.tracking), zone, radius_prior, update, visible)
 
-    def known() -> Obstacles:  # the fruit known now
-        return Obstacles.of(
-            [t for t in tracker.tracks if t.confirmed], [h for h in seen_in_part.tracks if h.confirmed]
-        )
+    def known() -> Obstacles:  # the fruit known now (those seen in part: in the work zone)
+        near = in_zone(seen_in_part.tracks, zone, s.tracking.zone_m)
+        return Obstacles.of([t for t in tracker.tracks if t.confirmed], [h for h in near if h.confirmed])
 
     def clear(plan: ViewPlan) -> bool:  # the move keeps the arm off the fruit known now
         if plan.q is None:
