@@ -158,10 +158,10 @@ def settled(seen_in_part: Sequence[Track], tracks: Sequence[Track]) -> list[tupl
     its own fruit (:func:`_within_neighbour`), each with that track. The loop forgets them
     before it fuses a view's evidence: a fruit seen in part before it was measured is that
     fruit, and its track, kept, gates the next views' evidence of a neighbour hidden behind it
-    and absorbs it (``ripe_truss``
-    67249277 of seed 1357: a track begun on the target, seen in part, took a hidden
-    neighbour's partial outlines from four views, stayed 22-28 mm from both, was explained by
-    the target's track, and the episode claimed every fruit with that neighbour missing)."""
+    and absorbs it (``ripe_truss`` 67249277 of seed 1357: a track begun on the target, seen in
+    part, took a hidden neighbour's partial outlines from four views, stayed 22-28 mm from
+    both, was explained by the target's track, and the episode claimed every fruit with that
+    neighbour missing)."""
     out = []
     for h in seen_in_part:
         if len(h.viewpoints) < 2 or not np.all(np.isfinite(h.belief.mean)):
@@ -187,12 +187,13 @@ def unexplained(
     seen_in_part: Sequence[Track], tracks: Sequence[Track], zone_centre_m: np.ndarray, zone_m: float
 ) -> list[Track]:
     """The confirmed fruit seen in part that lie in the work zone (centre within ``zone_m`` of
-    ``zone_centre_m``) and that no measured track explains: their centre farther from every
-    track's than a neighbour's could lie (the track's radius and :data:`NO_NEIGHBOUR_SHARE`
-    of its own: fruit do not interpenetrate) and disagreeing at
+    ``zone_centre_m``: :func:`in_zone`) and that no measured track explains: their centre
+    farther from every track's than a neighbour's could lie (the track's radius and
+    :data:`NO_NEIGHBOUR_SHARE` of its own: fruit do not interpenetrate) and disagreeing at
     :data:`EXPLAINED_PROBABILITY` (χ², 3 components, the two covariances summed) with every
-    track's centre but those measured in a view that saw it in part (one image does not both
-    measure a fruit and see it in part: that was a fruit behind it)."""
+    track's centre; neither explains it for a track measured in a view that saw it in part
+    (one image does not both measure a fruit and see it in part: that was a fruit behind it,
+    :func:`_within_neighbour`)."""
     limit = nis_threshold(EXPLAINED_PROBABILITY, 3)
     out = []
     for h in in_zone(seen_in_part, zone_centre_m, zone_m):
