@@ -211,6 +211,60 @@ def test_views_from_one_place_do_not_make_an_estimate_stable():
     assert StopRules(sigma_m=1e-3, stable_m=5e-4).outcome(views([0.0, 0.0, 0.0, 0.0, 0.0])) == "stable"
 
 
+def _dispute_views(nis: list[float], directions_deg: list[float], reset_at: int | None = None):
+    """Views of a fruit at the origin, every one accepted and converged (σ 0.5 mm) but for its
+    NIS and its direction (degrees about z, from the fruit to the camera, 0.25 m away)."""
+    from bve_mj.estimation.belief import Belief
+    from bve_mj.loop.episode import ViewRecord
+    from bve_mj.loop.events import Event
+
+    b = Belief(np.zeros(3), np.eye(3) * 0.5e-3**2)
+    views = []
+    for i, (n, a) in enumerate(zip(nis, directions_deg, strict=True)):
+        p = 0.25 * np.array([np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0])
+        events = (Event("belief_reset"),) if i == reset_at else ()
+        views.append(ViewRecord(i, p, None, True, 0.0, True, True, n, b, None, events))
+    return views
+
+
+def test_a_view_that_disputes_the_belief_holds_converged_back_until_an_independent_view_agrees():
+    """An accepted measurement with NIS beyond the 99.9% quantile says the belief or the view is
+    off by more than the noise allows; "converged" waits until a view 30 deg or more from it
+    agrees (seen in truss_cluster, seed 3976831502: a dispute at NIS 24 between a side view and
+    views from above, "settled" by a view from above, claimed σmax 0.9 mm 4.3 mm off). Views from
+    the disputing view's own direction share its error and settle nothing; the first accepted
+    view is tested only against the prior; a belief reset starts over."""
+    from bve_mj.config import EpisodeConfig
+    from bve_mj.loop.episode import StopRules
+
+    rules = StopRules.for_episode(EpisodeConfig(), "camera")
+    assert rules.agree_nis == pytest.approx(16.266, abs=1e-3)
+    assert StopRules.for_episode(EpisodeConfig(), "range").agree_nis == pytest.approx(10.828, abs=1e-3)
+    calm = _dispute_views([40.0, 2.0, 3.0], [0.0, 10.0, 20.0])  # the first: against the prior
+    assert rules.outcome(calm) == "converged" and rules.standing_dispute(calm) is None
+    disputed = _dispute_views([1.0, 2.0, 24.0], [0.0, 40.0, 80.0])
+    assert rules.outcome(disputed) is None and rules.standing_dispute(disputed) is disputed[2]
+    same_side = _dispute_views([1.0, 2.0, 24.0, 3.0, 2.0], [0.0, 40.0, 80.0, 95.0, 100.0])
+    assert rules.outcome(same_side) is None  # 15 and 20 deg from the disputing view
+    settled = _dispute_views([1.0, 2.0, 24.0, 3.0, 2.0], [0.0, 40.0, 80.0, 95.0, 40.0])
+    assert rules.outcome(settled) == "converged" and rules.standing_dispute(settled) is None
+    again = _dispute_views([1.0, 2.0, 24.0, 3.0, 30.0], [0.0, 40.0, 80.0, 40.0, 0.0])
+    assert rules.outcome(again) is None  # the last dispute is the one to settle
+    reset = _dispute_views([1.0, 24.0, 50.0, 2.0, 3.0], [0.0, 40.0, 80.0, 120.0, 160.0], reset_at=2)
+    assert rules.outcome(reset) == "converged"  # the reset view's own NIS is against the old belief
+    off = StopRules.for_episode(EpisodeConfig(agree_views=0), "camera")
+    assert off.agree_nis is None and off.outcome(disputed) == "converged"
+
+
+@pytest.mark.parametrize("bad", [-1, 101, 1.5, True, "2"])
+def test_agree_views_is_validated(bad):
+    from bve_mj.config import EpisodeConfig
+    from bve_mj.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"episode\.agree_views"):
+        EpisodeConfig(agree_views=bad)
+
+
 def test_many_views_stop_when_the_view_stops_changing():
     """--views 10000 --approach used to take 10,001 views (283 s) and end with NEES 3727."""
     s = with_overrides(Settings(), episode={"approach": True, "views": 10000})
@@ -370,3 +424,42 @@ def test_views_record_the_filters_own_belief_beside_a_wider_claim():
     assert filter_nees == pytest.approx(plain.final.mahalanobis_sq(truth))
     assert claimed.final.mahalanobis_sq(truth) == pytest.approx(filter_nees / 4.0)
     assert plain.final_filter is plain.final
+
+
+class _Listening(_Still):
+    """A planner that records the views it is told failed."""
+
+    def __init__(self):  # type: ignore[no-untyped-def]
+        self.failed: list[np.ndarray] = []
+
+    def note_failed_view(self, p_world_camera, p_world_target):  # type: ignore[no-untyped-def]
+        self.failed.append(np.asarray(p_world_camera, float).copy())
+
+
+def test_a_standing_dispute_holds_the_claim_back_and_sends_the_planner_elsewhere():
+    """Two views agree, a third disputes them (10 mm off at σ 1 mm, not gated) and the views
+    after it all come from its direction: no view settles the dispute, so the episode never
+    says converged (it would after three views without the rule), and the planner is told of
+    each disputing view once, as a view that failed, so that it looks from elsewhere."""
+    from bve_mj.config import FilterConfig
+    from bve_mj.estimation.belief import Belief
+    from bve_mj.estimation.metrics import chi2_quantile
+    from bve_mj.loop.episode import StopRules, run_episode
+
+    truth = np.array([0.40, 0.0, 0.20])
+    off = truth + [0.0, 0.010, 0.0]
+    prior = Belief.isotropic(np.array([0.41, 0.0, 0.20]), 0.02)
+    rules = StopRules(sigma_m=1.5e-3, min_accepted=3, agree_nis=float(chi2_quantile(0.999, 3)))
+    planner = _Listening()
+    world = _Scripted([truth, truth, off, off, off, off])
+    result = run_episode(world, planner, prior, FilterConfig(), steps=5, stop=rules)
+    assert result.views[2].nis > rules.agree_nis and result.outcome == "max_views"
+    disputing = [v for v in result.views[1:] if v.nis > rules.agree_nis]
+    assert len(planner.failed) == len(disputing)  # each disputing view told once, not once a view
+    np.testing.assert_array_equal(planner.failed[0], result.views[2].p_world_camera)
+    calm = run_episode(_Scripted([truth] * 6), _Listening(), prior, FilterConfig(), steps=5, stop=rules)
+    assert calm.outcome == "converged" and len(calm.views) == 3
+    plain = StopRules(sigma_m=1.5e-3, min_accepted=3)
+    world = _Scripted([truth, truth, off, off, off, off])
+    undisputed = run_episode(world, _Listening(), prior, FilterConfig(), steps=5, stop=plain)
+    assert undisputed.outcome == "converged"

@@ -159,6 +159,7 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
         "sigma_max_mm": 1e3 * final.sigma_max_m,
         "silent_failure": bool(outcome.success and nees > SILENT_NEES),
         "answered_outside": bool(outcome.localised and nees > SILENT_NEES),
+        "disputed": ep.standing_dispute() is not None,
         "detected_views": sum(v.measured for v in ep.result.views),
         "accepted_views": sum(v.accepted for v in ep.result.views),
         "truth_m": ep.truth.tolist(),
@@ -250,6 +251,7 @@ class SuiteResult:
             "error_to_crb_median": float(np.median(crb)) if crb.size else math.nan,
             "silent_failures": sum(bool(r.get("silent_failure")) for r in rows),
             "answered_outside": sum(bool(r.get("answered_outside")) for r in rows),
+            "disputed": sum(bool(r.get("disputed")) for r in rows),  # a dispute standing at the end
             "views_median": float(np.median([r["views"] for r in ok])) if ok else math.nan,
             "wall_s": float(sum(r.get("wall_s", 0.0) for r in rows)),
             "runs": list(rows),

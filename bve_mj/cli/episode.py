@@ -145,6 +145,13 @@ def cmd_episode(args: argparse.Namespace) -> int:
     outcome = Outcome(doc["outcome"])
     if outcome.note is not None:
         print(outcome.note)
+    disputed = result.standing_dispute()
+    if disputed is not None and outcome.localised:
+        print(
+            f"view {disputed.iteration} disputed the estimate (NIS {disputed.nis:.1f}, beyond the noise "
+            "model's 99.9%) and no view from another direction settled it: the estimate is an answer, "
+            "not a claim that it is right"
+        )
     if video_path is not None:
         print(f"wrote {video_path} ({frames} frames)")
     if plots_prefix is not None:

@@ -310,6 +310,17 @@ class EpisodeConfig:
             "from elsewhere tells"
         ),
     )
+    agree_views: int = field(
+        default=1,
+        metadata=_why(
+            "converged also needs, after the last accepted measurement that disputed the belief (NIS "
+            "beyond the 99.9% chi-square quantile), this many accepted views from directions 30 deg "
+            "or more away from it (independent errors) that agreed: the dispute says one of the two "
+            "is off by more than the noise allows, and only an independent view settles which (seen "
+            "in truss_cluster: 4.3 mm off claiming 0.9 mm after a dispute at NIS 24 that views from "
+            "the same side 'confirmed'); 0 = no such check"
+        ),
+    )
     stop_stable_m: float = field(
         default=0.0003, metadata=_why("stop when the estimate moves less than this ...", "m")
     )
@@ -340,6 +351,9 @@ class EpisodeConfig:
         _positive_int("episode", "views", self.views, 10_000)
         _positive_int("episode", "stable_views", self.stable_views, 100)
         _positive_int("episode", "converge_after", self.converge_after, 100)
+        agree = self.agree_views
+        if isinstance(agree, bool) or not isinstance(agree, (int, np.integer)) or not 0 <= agree <= 100:
+            raise ConfigError("episode.agree_views", agree, "an integer in [0, 100]")
         for f in ("stop_sigma_m", "approach_distance_m"):
             _positive("episode", f, getattr(self, f))
         _non_negative("episode", "initial_error_m", self.initial_error_m)

@@ -28,6 +28,7 @@ and radius in the state) and claims; only the choice of the next view is the age
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -203,9 +204,9 @@ class ViewPlanningEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def _localised(self) -> bool:
         """The episode's ``converged`` rule: claimed σmax below the threshold with enough
-        accepted measurements since the last belief reset."""
+        accepted measurements since the last belief reset, and no dispute standing."""
         ep = self.settings.episode
-        rule = StopRules(sigma_m=ep.stop_sigma_m, min_accepted=ep.converge_after)
+        rule = StopRules.for_episode(dataclasses.replace(ep, approach=False), self.settings.measurement.kind)
         return rule.outcome(self._running().views) == Outcome.CONVERGED
 
     def _image(self) -> np.ndarray:

@@ -102,6 +102,12 @@ class MujocoEpisode:
         """The target's equatorial radius [m] (what a radius in the state estimates)."""
         return self.info.target.radius_m
 
+    def standing_dispute(self) -> ViewRecord | None:
+        """The view whose measurement disputed the estimate and that no independent view
+        settled by the end (:meth:`~bve_mj.loop.stops.StopRules.standing_dispute`), or None."""
+        rules = StopRules.for_episode(self.settings.episode, self.settings.measurement.kind)
+        return rules.standing_dispute(self.result.views)
+
     def cramer_rao_mm(self) -> float:
         """√tr of the centre block of the Cramér-Rao bound of the views this episode fused
         (:func:`bve_mj.estimation.metrics.cramer_rao_bound`: the prior, and each accepted view's model
@@ -181,6 +187,7 @@ class MujocoEpisode:
             **self._final_radius_json(final),
             "state": self._state_json(final),
             "outcome": self.result.outcome,
+            "disputed_view": None if (disputed := self.standing_dispute()) is None else disputed.iteration,
             "wall_s": self.result.wall_s,
         }
 
@@ -330,19 +337,7 @@ def episode_parts(
         fault_rng = np.random.default_rng(start.fault_ss)
         loop_world = FaultyWorld(world, s.faults, fault_rng)
         planner = FaultyPlanner(planner, s.faults.planner_failure_p, fault_rng)
-    stop = (
-        StopRules(
-            approach_distance_m=ep.approach_distance_m, stall_m=ep.stall_m, stable_views=ep.stable_views
-        )
-        if ep.approach
-        else StopRules(
-            sigma_m=ep.stop_sigma_m,
-            min_accepted=ep.converge_after,
-            stable_m=ep.stop_stable_m,
-            stable_views=ep.stable_views,
-            stall_m=ep.stall_m,
-        )
-    )
+    stop = StopRules.for_episode(ep, s.measurement.kind)
     claims, correlation = None, None
     if world.noise is not None:
         claims = Claims.of_detector(

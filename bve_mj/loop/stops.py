@@ -2,15 +2,26 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from bve_mj.estimation.metrics import chi2_quantile
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.loop.records import ViewRecord
 
-__all__ = ["StopRules", "accepted_since_reset", "supported"]
+if TYPE_CHECKING:
+    from bve_mj.config import EpisodeConfig
+
+__all__ = ["SETTLE_DEG", "StopRules", "accepted_since_reset", "supported"]
+
+SETTLE_DEG = 30.0
+"""A view this far (or farther) in direction from another, seen from the fruit, is an
+independent witness of it: the detector's errors of two views correlate by 0.4-0.6 within 5°,
+0.15-0.25 at 10-15° and not at all beyond 30° (:mod:`bve_mj.estimation.view_correlation`)."""
 
 
 @dataclass(frozen=True)
@@ -27,6 +38,17 @@ class StopRules:
             range-only episodes: seen in ``truss_cluster``, held still by three views within
             8 mm of each other, 11.8 mm off claiming σmax 8.7 mm), so it shows nothing about
             whether the estimate is stable.
+        agree_nis: when set, "converged" and "stable" also need no dispute standing: after
+            the last accepted measurement since the last reset (its first excepted: that one
+            is tested only against the prior) whose NIS exceeded this (the 99.9% χ² quantile of
+            the measurement's dimension), ``agree_views`` accepted views from directions at
+            least :data:`SETTLE_DEG` away from it (:meth:`standing_dispute`). A view that
+            disputes the belief says one of the two is off by more than the noise model
+            allows, and only a view whose error is independent of it settles which (seen in
+            ``truss_cluster``, seed 3976831502: a side view and views from above disagreed at
+            NIS 24; the next view from above agreed with the first, and the episode claimed
+            σmax 0.9 mm 4.3 mm off).
+        agree_views: see ``agree_nis``.
         approach_distance_m: the camera is this close to the estimate ("approached").
         stall_m: the camera moved less than this over ``stable_views`` views, each planned
             and reached (a fallback or an IK failure does not count): the planner finds no
@@ -42,6 +64,8 @@ class StopRules:
     stable_views: int = 3
     approach_distance_m: float | None = None
     stall_m: float | None = None
+    agree_nis: float | None = None
+    agree_views: int = 1
 
     def outcome(self, views: list[ViewRecord]) -> Outcome | None:
         b = views[-1].belief
@@ -64,6 +88,7 @@ class StopRules:
             self.sigma_m is not None
             and b.sigma_max_m <= self.sigma_m
             and accepted_since_reset(views) >= self.min_accepted
+            and self.standing_dispute(views) is None
         ):
             return Outcome.CONVERGED
         if self.stable_m is not None and len(views) > n and all(v.accepted for v in views[-n:]):
@@ -75,9 +100,55 @@ class StopRules:
                 np.linalg.norm(views[-i].p_world_camera - views[-i - 1].p_world_camera) >= self.stall_m
                 for i in range(1, n + 1)
             )
-            if max(moves) <= self.stable_m and apart:
+            if max(moves) <= self.stable_m and apart and self.standing_dispute(views) is None:
                 return Outcome.STABLE
         return Outcome.STALLED if stalled else None
+
+    @classmethod
+    def for_episode(cls, episode: EpisodeConfig, measurement_kind: str) -> StopRules:
+        """The closed loop's rules from its settings: approach mode's, or the localising ones
+        (a dispute's NIS limit the 99.9% χ² quantile of the measurement's dimension: the
+        apparent size alone for ``range``, bearing and size otherwise)."""
+        if episode.approach:
+            return cls(
+                approach_distance_m=episode.approach_distance_m, stall_m=episode.stall_m,
+                stable_views=episode.stable_views,
+            )  # fmt: skip
+        dimension = 1 if measurement_kind == "range" else 3
+        return cls(
+            sigma_m=episode.stop_sigma_m,
+            min_accepted=episode.converge_after,
+            stable_m=episode.stop_stable_m,
+            stable_views=episode.stable_views,
+            stall_m=episode.stall_m,
+            agree_nis=float(chi2_quantile(0.999, dimension)) if episode.agree_views else None,
+            agree_views=max(episode.agree_views, 1),
+        )
+
+    def standing_dispute(self, views: Sequence[ViewRecord]) -> ViewRecord | None:
+        """The last view since the last reset (its first accepted one excepted) whose accepted
+        measurement disputed the belief (NIS above ``agree_nis``), unless ``agree_views``
+        accepted views after it, from directions at least :data:`SETTLE_DEG` away from it
+        (seen from the estimate), agreed; None when no dispute stands (or ``agree_nis`` is
+        unset)."""
+        if self.agree_nis is None:
+            return None
+        start = max((k for k, v in enumerate(views) if v.has("belief_reset")), default=0)
+        fused = [v for v in views[start:] if v.accepted][1:]
+        disputes = [k for k, v in enumerate(fused) if v.nis > self.agree_nis]
+        if not disputes:
+            return None
+        centre = views[-1].belief.centre_m
+        disputed = fused[disputes[-1]]
+        d0 = _unit(disputed.p_world_camera - centre)
+        cos_limit = math.cos(math.radians(SETTLE_DEG))
+        after = fused[disputes[-1] + 1 :]
+        settling = [v for v in after if _unit(v.p_world_camera - centre) @ d0 <= cos_limit]
+        return None if len(settling) >= self.agree_views else disputed
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return np.asarray(v, dtype=float) / float(np.linalg.norm(v))
 
 
 def accepted_since_reset(views: Sequence[ViewRecord]) -> int:
