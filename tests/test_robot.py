@@ -78,7 +78,12 @@ def test_batched_camera_poses_match_pinocchio(arm):
 
 def test_look_at_residuals_tell_which_starts_solve(arm):
     """The batched solve ends where each single start of the look-at IK ends: the same
-    verdict for every start, residuals alike."""
+    verdict for every start (solved, and worth solving one by one), residuals alike. A start
+    that fails wanders for all its iterations, and rounding that differs in the last bit can
+    send it elsewhere (with pin 4.1 and mujoco 4.0, one of the 41 failing Manipulator-H starts
+    ends at 0.53 where the single solve ends at 0.41, far above the screen's 0.01 either way):
+    the rest agree to 1e-6."""
+    from bve_mj.loop.start import _WORTH_SOLVING
     from bve_mj.robot.ik import IkOptions, _solve_from, look_at_residuals
 
     kin, _ = arm
@@ -99,7 +104,9 @@ def test_look_at_residuals_tell_which_starts_solve(arm):
     solved = single < 1e-5
     assert 0 < solved.sum() < n  # both kinds are tested
     np.testing.assert_array_equal(batched < 1e-5, solved)
-    np.testing.assert_allclose(batched[~solved], single[~solved], rtol=0.1)
+    np.testing.assert_array_equal(batched <= _WORTH_SOLVING, single <= _WORTH_SOLVING)
+    alike = np.isclose(batched[~solved], single[~solved], rtol=1e-6, atol=0.0)
+    assert alike.mean() >= 0.95, f"{(~alike).sum()} of {alike.size} failing starts end elsewhere"
 
 
 def test_look_at_ik_round_trip(arm):
