@@ -313,12 +313,12 @@ class EpisodeConfig:
     agree_views: int = field(
         default=1,
         metadata=_why(
-            "converged also needs, after the last accepted measurement that disputed the belief (NIS "
-            "beyond the 99.9% chi-square quantile), this many accepted views from directions 30 deg "
-            "or more away from it (independent errors) that agreed: the dispute says one of the two "
-            "is off by more than the noise allows, and only an independent view settles which (seen "
-            "in truss_cluster: 4.3 mm off claiming 0.9 mm after a dispute at NIS 24 that views from "
-            "the same side 'confirmed'); 0 = no such check"
+            "converged and stable also need, after the last accepted measurement that disputed the belief"
+            " (NIS beyond the 99.9% chi-square quantile), this many accepted views from directions 30 deg"
+            " or more away from it (independent errors) that agreed: the dispute says one of the two is "
+            "off by more than the noise allows, and only an independent view settles which (seen in "
+            "truss_cluster: 4.3 mm off claiming 0.9 mm after a dispute at NIS 24 that views from the same"
+            " side 'confirmed'); 0 = no such check"
         ),
     )
     stop_stable_m: float = field(

@@ -63,7 +63,7 @@ def run_episode(
     its direction shares its error and cannot settle the dispute, so the planner looks from
     elsewhere (seen in ``truss_cluster``, seed 3976831502: the camera held where the disputing
     view was and ended ``stalled`` 4.3 mm off; told, it took three views from elsewhere and
-    converged 0.4 mm off).
+    ended 0.4 mm off).
 
     ``claims``: what the views record (and the stop rules test) beside the filter's own
     belief, which the planner plans with (see :class:`Claims`); None: the filter's belief.
