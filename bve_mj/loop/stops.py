@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from bve_mj.estimation.metrics import chi2_quantile
+from bve_mj.geometry import unit
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.loop.records import ViewRecord
 
@@ -140,15 +141,11 @@ class StopRules:
             return None
         centre = views[-1].belief.centre_m
         disputed = fused[disputes[-1]]
-        d0 = _unit(disputed.p_world_camera - centre)
+        d0 = unit(disputed.p_world_camera - centre)
         cos_limit = math.cos(math.radians(SETTLE_DEG))
         after = fused[disputes[-1] + 1 :]
-        settling = [v for v in after if _unit(v.p_world_camera - centre) @ d0 <= cos_limit]
+        settling = [v for v in after if unit(v.p_world_camera - centre) @ d0 <= cos_limit]
         return None if len(settling) >= self.agree_views else disputed
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return np.asarray(v, dtype=float) / float(np.linalg.norm(v))
 
 
 def accepted_since_reset(views: Sequence[ViewRecord]) -> int:
