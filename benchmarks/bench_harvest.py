@@ -26,7 +26,7 @@ from bve_mj.campaigns.spec import episode_seed
 from bve_mj.config import PlannerKind, with_overrides
 from bve_mj.errors import BveError
 from bve_mj.loop.arm_clearance import FruitClearance
-from bve_mj.loop.every_fruit import FruitsView
+from bve_mj.loop.fruit_records import FruitsView
 from bve_mj.loop.harvest import Visit
 from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
 from bve_mj.sim.mujoco_world import MujocoWorld

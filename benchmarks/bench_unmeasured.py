@@ -29,7 +29,7 @@ from bve_mj.config import with_overrides
 from bve_mj.estimation.assignment import Sighting
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.unmeasured import CENTRE_SIGMA_REL, RADIUS_SIGMA_REL, too_small
-from bve_mj.loop.every_fruit import FruitsView
+from bve_mj.loop.fruit_records import FruitsView
 from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
 from bve_mj.sim.scene_model import Fruit
 

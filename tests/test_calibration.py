@@ -233,7 +233,7 @@ def test_the_planners_noise_of_a_view_not_taken_is_the_models():
     noise model gives a detection of it with the typical fit: every term that grows with
     the apparent radius (elongation, scale) included."""
     from bve_mj.config.settings import load_settings
-    from bve_mj.planning.information import size_information
+    from bve_mj.planning.size_information import size_information
 
     settings = load_settings("examples/scenarios/suite/plum.toml")
     model, f = load_noise_model("default"), settings.camera.focal_px

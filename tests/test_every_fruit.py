@@ -11,7 +11,7 @@ import pytest
 from bve_mj.config import Settings, load_settings, with_overrides
 from bve_mj.estimation import BearingSizeModel, Belief
 from bve_mj.geometry import camera_rotation
-from bve_mj.loop.every_fruit import FruitState
+from bve_mj.loop.fruit_records import FruitState
 from bve_mj.loop.harvest import harvest_order
 from bve_mj.planning.every_fruit import EveryFruitPlanner, FruitTarget, information_gain
 from bve_mj.planning.plan import ViewPlan

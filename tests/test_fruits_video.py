@@ -12,7 +12,7 @@ import pytest
 from bve_mj.cli import main
 from bve_mj.config import load_settings, with_overrides
 from bve_mj.estimation import Belief
-from bve_mj.loop.every_fruit import FruitState
+from bve_mj.loop.fruit_records import FruitState
 from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
 from bve_mj.reporting.fruits_video import (
     CONFIRMED,

@@ -9,7 +9,7 @@ from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.estimation import Belief
 from bve_mj.planning import BvePlanner, CameraInformation, max_violation
 from bve_mj.planning.horizon import ChainedStep, HorizonObjective, horizon_constraints
-from bve_mj.planning.information import SizeInformation
+from bve_mj.planning.size_information import SizeInformation
 from tests.conftest import finite_difference
 
 

@@ -170,7 +170,7 @@ def test_constraint_values_match_the_paper():
 # ---------------------------------------------------------------- the radius in the state
 from bve_mj.estimation import BearingSizeModel, SizeModel  # noqa: E402
 from bve_mj.geometry import camera_rotation  # noqa: E402
-from bve_mj.planning.information import SizeInformation  # noqa: E402
+from bve_mj.planning.size_information import SizeInformation  # noqa: E402
 
 SIZE_INFOS = {
     "bearing_size": SizeInformation((2e-7, 1e-9), (1e-7, 2e-9), bearing=True),

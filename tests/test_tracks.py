@@ -353,6 +353,26 @@ def test_two_tracks_of_one_fruit_that_disagree_merge_into_their_fused_belief_wid
     assert 0.001 < t.belief.sigma_max_m < 0.01  # placed (each alone: 28 mm along its ray), not to 0.3 mm
 
 
+def test_forgotten_tracks_leave_by_identity_and_are_not_counted_as_dropped():
+    """``Tracker.forget`` removes exactly the tracks given (others stay, in order, with their
+    state), and none of them is counted as deleted for misses; with no argument, every one."""
+    c, r = _truss(3, np.random.default_rng(4))
+    tracker = Tracker(
+        TrackingConfig(fruits="all", zone_m=0.3), c.mean(axis=0), (0.03, 0.003), UPDATE, _visible()
+    )
+    p, R = _views(3)[1]
+    tracker.step(
+        [Sighting(_z(ci, ri, p, R), _model(p, R)) for ci, ri in zip(c, r, strict=True)], _model(p, R), 0
+    )
+    a, b, d = tracker.tracks
+    tracker.forget([b])
+    assert tracker.tracks == [a, d] and tracker.tracks[0] is a and not tracker.dropped
+    tracker.forget([])
+    assert tracker.tracks == [a, d]
+    tracker.forget()
+    assert tracker.tracks == [] and not tracker.dropped
+
+
 def test_two_things_in_one_image_never_merge_by_agreement_nor_confirm_each_other():
     """Two sightings of one view (two fragments of a fruit, or two fruit side by side): their
     rays leave one camera and agree near it, crossing nowhere. Seen again from the same pose,

@@ -18,8 +18,8 @@ from bve_mj.estimation.view_correlation import (
 )
 from bve_mj.geometry import camera_rotation
 from bve_mj.loop.episode import run_episode
-from bve_mj.planning.information import SizeInformation
 from bve_mj.planning.plan import ViewPlan
+from bve_mj.planning.size_information import SizeInformation
 from bve_mj.sim.world import Observation
 from tests.conftest import finite_difference
 

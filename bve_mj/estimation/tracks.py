@@ -31,17 +31,9 @@ centre and radius), and per view:
    something stands there, and a fruit behind its neighbours is refused from most views
    (``ripe_truss`` 4203080826: the target, seen from two views to 0.3 mm, was deleted after
    three refusals and never seen again);
-5. **merges** duplicates: two tracks that are one fruit. Each track's belief is its own
-   detections and the radius prior, so their information adds, less the radius prior's
-   counted twice; they are merged when they agree (χ² of the difference of their states,
-   ``merge_probability``) and, for two confirmed tracks, their centres lie closer than a
-   fruit's radius. Two tentative tracks of one fruit are two rays that cross at it (each
-   long along its ray), so for them agreement alone decides; two with a view in common are
-   two things in one image, whose rays from one camera agree near it and cross nowhere: they
-   never merge by agreement. Two tracks whose centres lie closer than a fruit's radius are
-   one fruit whatever their beliefs say (fruit cannot overlap): when they disagree, their
-   fused belief is widened by χ²/4 (they differ more than their covariances allow: a bias),
-   or, with a view in common, the one with more detections stays as it is.
+5. **merges** duplicates, two tracks that are one fruit
+   (:func:`~bve_mj.estimation.track_merge.merge_duplicates`: when they agree, or their
+   centres lie closer than a fruit's radius).
 """
 
 from __future__ import annotations
@@ -59,6 +51,7 @@ from bve_mj.estimation.assignment import Sighting, assign, belief_from_detection
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.ekf import UpdateResult, nis_threshold
 from bve_mj.estimation.models import BearingSizeModel
+from bve_mj.estimation.track_merge import merge_duplicates
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
 from bve_mj.geometry import unit
 
@@ -226,6 +219,15 @@ class Tracker:
         self.tracks.append(t)
         return t
 
+    def forget(self, tracks: Sequence[Track] | None = None) -> None:
+        """Remove ``tracks`` (by identity; every track when None): what the caller learned
+        they are not (a fruit seen in part that a measured track shows to be its own), not a
+        deletion for misses (:attr:`dropped` does not count them)."""
+        if tracks is None:
+            self.tracks.clear()
+            return
+        self.tracks[:] = [t for t in self.tracks if all(t is not g for g in tracks)]
+
     # ------------------------------------------------------------------ a view
     def step(
         self,
@@ -278,7 +280,12 @@ class Tracker:
                 continue
             started.append((j, fresh.id))
             events.append(TrackEvent("started", fresh.id))
-        events += self._merge()
+        events += [
+            TrackEvent("merged", dropped, kept)
+            for dropped, kept in merge_duplicates(
+                self.tracks, self.radius_prior, self.config.merge_probability, self.config.confirm_hits
+            )
+        ]
         for t in list(self.tracks):
             missed = t.failed >= cfg.delete_misses or t.misses >= 3 * cfg.delete_misses
             if not t.confirmed and missed and not t.triangulated:
@@ -334,59 +341,6 @@ class Tracker:
         self.tracks.append(t)
         return t
 
-    def _merge(self) -> list[TrackEvent]:
-        """Merge duplicate tracks (see the module docstring)."""
-        events: list[TrackEvent] = []
-        limit = nis_threshold(self.config.merge_probability, 4)
-        merged = True
-        while merged:
-            merged = False
-            for a, b in _pairs(self.tracks):
-                d = a.belief.mean - b.belief.mean
-                chi2 = float(d @ np.linalg.solve(a.belief.cov + b.belief.cov, d))
-                close = float(np.linalg.norm(a.centre_m - b.centre_m)) < 0.5 * (a.radius_m + b.radius_m)
-                if chi2 > limit and not close:
-                    continue  # two fruit: their fused belief is not needed
-                fused = self._fused(a.belief, b.belief)
-                both = a.confirmed and b.confirmed
-                # two rays from one camera agree near it without crossing at a fruit: tracks
-                # with a view in common (two things in one image) never merge by agreement
-                agree = fused is not None and chi2 <= limit and not (a.views & b.views)
-                if (agree and (close or not both)) or close:
-                    keep, drop = (a, b) if (a.hits, -a.id) >= (b.hits, -b.id) else (b, a)
-                    if fused is not None and (agree or not (a.views & b.views)):
-                        keep.belief = fused if agree else Belief(fused.mean, fused.cov * max(chi2 / 4.0, 1.0))
-                    keep.hits += drop.hits
-                    keep.views |= drop.views
-                    for q in drop.viewpoints:
-                        keep.note_viewpoint(q)
-                    keep.confirmed = (
-                        keep.confirmed or drop.confirmed or len(keep.viewpoints) >= self.config.confirm_hits
-                    )
-                    keep.innovations += drop.innovations
-                    keep.directions += drop.directions
-                    keep.last_view = max(keep.last_view, drop.last_view)
-                    self.tracks.remove(drop)
-                    events.append(TrackEvent("merged", drop.id, keep.id))
-                    merged = True
-                    break
-        return events
-
-    def _fused(self, a: Belief, b: Belief) -> Belief | None:
-        """The belief of two tracks of one fruit: their information added, the radius prior's
-        counted once (each holds it). None when it is not positive definite."""
-        r0, sr = self.radius_prior
-        prior_info = np.zeros((4, 4))
-        prior_info[3, 3] = 1.0 / sr**2
-        try:
-            La, Lb = np.linalg.inv(a.cov), np.linalg.inv(b.cov)
-            L = La + Lb - prior_info
-            P = np.linalg.inv(L)
-            x = P @ (La @ a.mean + Lb @ b.mean - prior_info @ np.array([0.0, 0.0, 0.0, r0]))
-            return Belief(x, P)
-        except (np.linalg.LinAlgError, EstimationError):
-            return None
-
     def snapshot(self) -> tuple[Track, ...]:
         """Copies of the tracks (for records: later views do not change them)."""
         copies = {"innovations": list, "directions": list, "views": set, "viewpoints": list}
@@ -394,7 +348,3 @@ class Tracker:
             dataclasses.replace(t, **{k: make(getattr(t, k)) for k, make in copies.items()})
             for t in self.tracks
         )
-
-
-def _pairs(tracks: list[Track]) -> list[tuple[Track, Track]]:
-    return [(a, b) for i, a in enumerate(tracks) for b in tracks[i + 1 :]]

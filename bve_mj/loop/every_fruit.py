@@ -24,7 +24,6 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -32,91 +31,24 @@ from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation.assignment import Sighting
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import BearingSizeModel
-from bve_mj.estimation.tracks import Track, Tracker, ViewTracking
+from bve_mj.estimation.tracks import Track, Tracker
 from bve_mj.estimation.unmeasured import explained_in_view, settled, too_small, unexplained
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.events import Event
+from bve_mj.loop.fruit_records import FruitsResult, FruitState, FruitsView
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.planning.every_fruit import EXPLORE, FruitTarget, PlansForEveryFruit
-from bve_mj.planning.plan import PlanStatus, ViewPlan
+from bve_mj.planning.plan import ViewPlan
 from bve_mj.planning.zone_coverage import ZoneCoverage
 from bve_mj.sim.world import ReportsUnmeasured, SeesEveryFruit
 
 __all__ = [
-    "FruitState",
-    "FruitsResult",
-    "FruitsView",
     "claimed",
     "explored_deg",
     "run_every_fruit",
     "seen_in_part_id",
     "seen_in_part_key",
 ]
-
-
-@dataclass(frozen=True)
-class FruitState:
-    """A track as a view left it.
-
-    Attributes:
-        id: the track's id.
-        belief: the claimed belief over its centre and radius (the filter's with the claims).
-        confirmed, hits, misses, expected: see :class:`~bve_mj.estimation.tracks.Track`.
-        localised: claimed σmax ≤ the stop threshold after enough detections.
-        filter_belief: the track's own belief where the claim differs from it, else None.
-    """
-
-    id: int
-    belief: Belief
-    confirmed: bool
-    hits: int
-    misses: int
-    expected: int
-    localised: bool
-    filter_belief: Belief | None = None
-
-
-@dataclass(frozen=True)
-class FruitsView:
-    """One view of an every-fruit episode: where the camera was, whom the view was planned
-    for, how many fruit it detected, what the tracker did, and every track after it."""
-
-    iteration: int
-    p_world_camera: np.ndarray
-    planned_for: int | None
-    plan_status: PlanStatus | None
-    plan_feasible: bool
-    plan_s: float
-    track_s: float
-    detections: int
-    tracking: ViewTracking
-    fruits: tuple[FruitState, ...]
-    world: dict[str, object] | None = None
-    events: tuple[Event, ...] = ()
-    unmeasured: tuple[FruitState, ...] = ()
-    """The fruit seen in part from enough views and explained by no track after this view
-    (:func:`~bve_mj.estimation.unmeasured.unexplained`; never localised)."""
-    zone_framed: float = math.nan
-    """The share of the work zone framed by this view or an earlier one
-    (:class:`~bve_mj.planning.zone_coverage.ZoneCoverage`; nan when the loop has none)."""
-
-
-@dataclass(frozen=True)
-class FruitsResult:
-    """A finished every-fruit episode."""
-
-    views: tuple[FruitsView, ...]
-    wall_s: float
-    outcome: Outcome
-
-    @property
-    def final(self) -> tuple[FruitState, ...]:
-        return self.views[-1].fruits if self.views else ()
-
-    @property
-    def unmeasured(self) -> tuple[FruitState, ...]:
-        """The fruit seen in part but never measured, at the end (see :class:`FruitsView`)."""
-        return self.views[-1].unmeasured if self.views else ()
 
 
 def claimed(track: Track, claims: Claims | None, stop_sigma_m: float, converge_after: int) -> FruitState:
@@ -354,12 +286,12 @@ def _seen_in_part(
     try:
         gone = settled(seen_in_part.tracks, tracker.tracks)  # before this view's evidence: see settled
         events += [Event("seen_in_part_settled", f"p{h.id} is track {t.id}") for h, t in gone]
-        seen_in_part.tracks[:] = [h for h in seen_in_part.tracks if all(h is not g for g, _ in gone)]
+        seen_in_part.forget([h for h, _ in gone])
         seen_in_part.step(weak, camera, iteration)
         found = unexplained(seen_in_part.tracks, tracker.tracks, zone_centre, zone_m)
     except (EstimationError, np.linalg.LinAlgError) as exc:
         events.append(Event("seen_in_part_reset", f"{type(exc).__name__}: {exc}"))
-        seen_in_part.tracks.clear()
+        seen_in_part.forget()
         return ()
     return tuple(FruitState(h.id, h.belief, h.confirmed, h.hits, h.misses, h.expected, False) for h in found)
 

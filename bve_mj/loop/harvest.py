@@ -48,7 +48,7 @@ from bve_mj.loop.arm_clearance import (
     Obstacles,
     deepest_x,
 )
-from bve_mj.loop.every_fruit import FruitState
+from bve_mj.loop.fruit_records import FruitState
 from bve_mj.planning.plan import ViewPlan
 from bve_mj.robot.ik import IkOptions, look_at_ik
 from bve_mj.sim.mujoco_world import MujocoWorld

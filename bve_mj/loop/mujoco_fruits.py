@@ -36,7 +36,8 @@ from bve_mj.loop.arm_clearance import (
     retreat_view,
 )
 from bve_mj.loop.claims import Claims
-from bve_mj.loop.every_fruit import FruitsResult, FruitState, FruitsView, run_every_fruit
+from bve_mj.loop.every_fruit import run_every_fruit
+from bve_mj.loop.fruit_records import FruitsResult, FruitState, FruitsView
 from bve_mj.loop.harvest import HarvestResult, RecordsHarvest, harvest
 from bve_mj.loop.mujoco import INNOVATION_PRIOR_DOF, episode_constraints, episode_settings
 from bve_mj.loop.outcomes import Outcome

@@ -37,12 +37,7 @@ from bve_mj.planning.constraints import (
     max_violation,
 )
 from bve_mj.planning.horizon import HorizonObjective, horizon_constraints
-from bve_mj.planning.information import (
-    FailedViewDiscount,
-    ObservationInformation,
-    SizeInformation,
-    observation_information,
-)
+from bve_mj.planning.information import FailedViewDiscount, ObservationInformation, observation_information
 from bve_mj.planning.losses import (
     ApproachTerm,
     DispersionLoss,
@@ -53,6 +48,7 @@ from bve_mj.planning.losses import (
     approach_activation,
 )
 from bve_mj.planning.plan import PlanStatus, ViewPlan
+from bve_mj.planning.size_information import SizeInformation
 from bve_mj.planning.solve import feasible_start, minimise
 
 __all__ = ["SEED_DIRECTIONS", "BvePlanner"]

@@ -28,7 +28,8 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from bve_mj.loop.every_fruit import FruitState, FruitsView, seen_in_part_id
+from bve_mj.loop.every_fruit import seen_in_part_id
+from bve_mj.loop.fruit_records import FruitState, FruitsView
 from bve_mj.planning.every_fruit import EXPLORE
 from bve_mj.reporting.outside_view import OutsideVideo
 from bve_mj.reporting.overlay import _FONT, _PATH, _TRUTH, _WHITE, _i, _mm, _shade, _View

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from bve_mj.loop.every_fruit import FruitState
+from bve_mj.loop.fruit_records import FruitState
 from bve_mj.reporting.overlay import _BLACK, _EST, _FONT, _TRUTH, _WHITE, _i, _tag, _text_block, _View
 from bve_mj.sim.scene_model import Fruit
 

@@ -1,0 +1,82 @@
+"""What an every-fruit episode leaves: each track as a view left it, a record per view, and the
+finished episode (:mod:`bve_mj.loop.every_fruit` makes them)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.tracks import ViewTracking
+from bve_mj.loop.events import Event
+from bve_mj.loop.outcomes import Outcome
+from bve_mj.planning.plan import PlanStatus
+
+__all__ = ["FruitState", "FruitsResult", "FruitsView"]
+
+
+@dataclass(frozen=True)
+class FruitState:
+    """A track as a view left it.
+
+    Attributes:
+        id: the track's id.
+        belief: the claimed belief over its centre and radius (the filter's with the claims).
+        confirmed, hits, misses, expected: see :class:`~bve_mj.estimation.tracks.Track`.
+        localised: claimed σmax ≤ the stop threshold after enough detections.
+        filter_belief: the track's own belief where the claim differs from it, else None.
+    """
+
+    id: int
+    belief: Belief
+    confirmed: bool
+    hits: int
+    misses: int
+    expected: int
+    localised: bool
+    filter_belief: Belief | None = None
+
+
+@dataclass(frozen=True)
+class FruitsView:
+    """One view of an every-fruit episode: where the camera was, whom the view was planned
+    for, how many fruit it detected, what the tracker did, and every track after it."""
+
+    iteration: int
+    p_world_camera: np.ndarray
+    planned_for: int | None
+    plan_status: PlanStatus | None
+    plan_feasible: bool
+    plan_s: float
+    track_s: float
+    detections: int
+    tracking: ViewTracking
+    fruits: tuple[FruitState, ...]
+    world: dict[str, object] | None = None
+    events: tuple[Event, ...] = ()
+    unmeasured: tuple[FruitState, ...] = ()
+    """The fruit seen in part from enough views and explained by no track after this view
+    (:func:`~bve_mj.estimation.unmeasured.unexplained`; never localised)."""
+    zone_framed: float = math.nan
+    """The share of the work zone framed by this view or an earlier one
+    (:class:`~bve_mj.planning.zone_coverage.ZoneCoverage`; nan when the loop has none)."""
+
+
+@dataclass(frozen=True)
+class FruitsResult:
+    """A finished every-fruit episode."""
+
+    views: tuple[FruitsView, ...]
+    wall_s: float
+    outcome: Outcome
+
+    @property
+    def final(self) -> tuple[FruitState, ...]:
+        return self.views[-1].fruits if self.views else ()
+
+    @property
+    def unmeasured(self) -> tuple[FruitState, ...]:
+        """The fruit seen in part but never measured, at the end (see :class:`FruitsView`)."""
+        return self.views[-1].unmeasured if self.views else ()
