@@ -1,5 +1,6 @@
 """Seeded closed-loop scenario checks in the rendered greenhouse."""
 
+import dataclasses
 import json
 
 import imageio.v2 as imageio
@@ -256,13 +257,14 @@ def test_a_view_that_disputes_the_belief_holds_converged_back_until_an_independe
     assert off.agree_nis is None and off.outcome(disputed) == "converged"
 
 
+@pytest.mark.parametrize("name", ["agree_views", "stall_escapes"])
 @pytest.mark.parametrize("bad", [-1, 101, 1.5, True, "2"])
-def test_agree_views_is_validated(bad):
+def test_agree_views_and_stall_escapes_are_validated(name, bad):
     from bve_mj.config import EpisodeConfig
     from bve_mj.errors import ConfigError
 
-    with pytest.raises(ConfigError, match=r"episode\.agree_views"):
-        EpisodeConfig(agree_views=bad)
+    with pytest.raises(ConfigError, match=rf"episode\.{name}"):
+        EpisodeConfig(**{name: bad})
 
 
 def test_many_views_stop_when_the_view_stops_changing():
@@ -463,3 +465,30 @@ def test_a_standing_dispute_holds_the_claim_back_and_sends_the_planner_elsewhere
     world = _Scripted([truth, truth, off, off, off, off])
     undisputed = run_episode(world, _Listening(), prior, FilterConfig(), steps=5, stop=plain)
     assert undisputed.outcome == "converged"
+
+
+def test_a_stalled_camera_is_sent_elsewhere_before_a_stall_ends_the_episode():
+    """A camera that stalls (three planned views within ``stall_m``) tells a planner that learns
+    from failed views that the view it holds at is spent, up to ``stall_escapes`` times (event
+    ``stall_escaped`` on the next view), and the episode goes on; the next stall after that
+    ends it. A planner that cannot learn ends at the first stall, and so does approach mode's
+    ``approach_blocked`` (no escapes there)."""
+    from bve_mj.config import EpisodeConfig, FilterConfig
+    from bve_mj.estimation.belief import Belief
+    from bve_mj.loop.episode import StopRules, run_episode
+
+    truth = np.array([0.40, 0.0, 0.20])
+    prior = Belief.isotropic(np.array([0.41, 0.0, 0.20]), 0.02)
+    rules = StopRules(stall_m=0.005, stable_views=3, stall_escapes=2)
+    planner = _Listening()
+    result = run_episode(_Scripted([truth] * 12), planner, prior, FilterConfig(), steps=10, stop=rules)
+    assert result.outcome == "stalled" and len(result.views) == 6
+    assert len(planner.failed) == 2
+    assert [v.has("stall_escaped") for v in result.views] == [False] * 4 + [True, True]
+    deaf = run_episode(_Scripted([truth] * 12), _Still(), prior, FilterConfig(), steps=10, stop=rules)
+    assert deaf.outcome == "stalled" and len(deaf.views) == 4
+    none = dataclasses.replace(rules, stall_escapes=0)
+    first = run_episode(_Scripted([truth] * 12), _Listening(), prior, FilterConfig(), steps=10, stop=none)
+    assert first.outcome == "stalled" and len(first.views) == 4
+    assert StopRules.for_episode(EpisodeConfig(stall_escapes=3), "camera").stall_escapes == 3
+    assert StopRules.for_episode(EpisodeConfig(approach=True), "camera").stall_escapes == 0

@@ -57,6 +57,12 @@ class StopRules:
             the same errors again (a per-fruit bias such as the unknown radius is not averaged
             out by repeating it). "approach_blocked" in approach mode (it cannot come closer),
             else "stalled".
+        stall_escapes: how many times :func:`~bve_mj.loop.episode.run_episode` goes on past a
+            stall (not in approach mode), the planner told that the view the camera holds at is
+            spent (a planner that learns from failed views then looks elsewhere): the planner's
+            optimum near the camera only repeats that view's errors, and a view from another
+            direction adds what they lack (the size-only measurement in trusses, where most
+            episodes stalled within a few millimetres of one spot).
     """
 
     sigma_m: float | None = None
@@ -67,6 +73,7 @@ class StopRules:
     stall_m: float | None = None
     agree_nis: float | None = None
     agree_views: int = 1
+    stall_escapes: int = 0
 
     def outcome(self, views: list[ViewRecord]) -> Outcome | None:
         b = views[-1].belief
@@ -124,6 +131,7 @@ class StopRules:
             stall_m=episode.stall_m,
             agree_nis=float(chi2_quantile(0.999, dimension)) if episode.agree_views else None,
             agree_views=max(episode.agree_views, 1),
+            stall_escapes=episode.stall_escapes,
         )
 
     def standing_dispute(self, views: Sequence[ViewRecord]) -> ViewRecord | None:
