@@ -471,8 +471,8 @@ def test_a_stalled_camera_is_sent_elsewhere_before_a_stall_ends_the_episode():
     """A camera that stalls (three planned views within ``stall_m``) tells a planner that learns
     from failed views that the view it holds at is spent, up to ``stall_escapes`` times (event
     ``stall_escaped`` on the next view), and the episode goes on; the next stall after that
-    ends it. A planner that cannot learn ends at the first stall, and so does approach mode's
-    ``approach_blocked`` (no escapes there)."""
+    ends it, as does one at the last view of the budget. A planner that cannot learn ends at
+    the first stall, and so does approach mode's ``approach_blocked`` (no escapes there)."""
     from bve_mj.config import EpisodeConfig, FilterConfig
     from bve_mj.estimation.belief import Belief
     from bve_mj.loop.episode import StopRules, run_episode
@@ -490,5 +490,8 @@ def test_a_stalled_camera_is_sent_elsewhere_before_a_stall_ends_the_episode():
     none = dataclasses.replace(rules, stall_escapes=0)
     first = run_episode(_Scripted([truth] * 12), _Listening(), prior, FilterConfig(), steps=10, stop=none)
     assert first.outcome == "stalled" and len(first.views) == 4
+    last = _Listening()  # a stall at the last view planned: no view left to look elsewhere from
+    end = run_episode(_Scripted([truth] * 12), last, prior, FilterConfig(), steps=3, stop=rules)
+    assert end.outcome == "stalled" and len(end.views) == 4 and not last.failed
     assert StopRules.for_episode(EpisodeConfig(stall_escapes=3), "camera").stall_escapes == 3
     assert StopRules.for_episode(EpisodeConfig(approach=True), "camera").stall_escapes == 0

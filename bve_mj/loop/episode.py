@@ -95,7 +95,8 @@ def run_episode(
         loop.step(plan, escaped + events)
         escaped = []
         outcome = stop.outcome(loop.views) if stop is not None else None
-        if outcome == Outcome.STALLED and escapes > 0 and isinstance(planner, LearnsFromFailedViews):
+        stalled = outcome == Outcome.STALLED and escapes > 0 and i < steps  # a view left to take
+        if stalled and isinstance(planner, LearnsFromFailedViews):
             # the planner's optimum near here repeats this view's errors: told it is spent,
             # the planner looks elsewhere
             planner.note_failed_view(world.p_world_camera, loop.belief.centre_m)
