@@ -340,8 +340,8 @@ class EpisodeConfig:
             "when the camera stalls (stall_m) and the planner learns from failed views, it is told the "
             "view it holds at is spent and the episode goes on, up to this many times, before a stall "
             "ends it: the planner's optimum near here fuses the same errors again, and a view from "
-            "elsewhere adds what they lack (range-only trusses, where most episodes stalled: median "
-            "error 10-20% lower, a few views more); 0 = a stall ends the episode"
+            "elsewhere adds what they lack (range-only trusses, where most episodes stalled: lower "
+            "median errors for a sixth more views); 0 = a stall ends the episode"
         ),
     )
     approach: bool = field(default=False, metadata=_why("approach mode: eq. 13 term on, no band"))
