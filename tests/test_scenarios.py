@@ -28,6 +28,21 @@ def test_the_suite_holds_the_named_scenarios_each_described():
     assert all(len(s.description) > 20 for s in suite)
 
 
+COMBINED = "examples/scenarios/combined"
+"""Scenes combined from the suite's conditions, outside its calibration: ``--dir`` runs them."""
+
+
+def test_the_combined_scenes_load_each_described_and_compile():
+    combined = load_suite(COMBINED)
+    assert len(combined) == 8 and not {s.name for s in combined} & {s.name for s in load_suite()}
+    kin = arm_kinematics("manipulator_h", "emanual")
+    for sc in combined:
+        assert len(sc.description) > 20
+        s = sc.settings()
+        spec, info = build_scene(kin, s.scene, np.random.default_rng(0), s.camera)
+        assert spec.compile().ngeom > 0 and info.target.colour == "red", sc.name
+
+
 @pytest.mark.parametrize("name", sorted(REQUIRED))
 def test_every_scenario_compiles_and_steps_without_warnings(name):
     (scenario,) = load_suite(only=[name])

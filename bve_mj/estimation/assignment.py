@@ -52,12 +52,22 @@ class Sighting:
     model: BearingSizeModel
 
 
-def belief_from_detection(sighting: Sighting, radius_m: float, radius_sigma_m: float) -> Belief:
+def belief_from_detection(
+    sighting: Sighting,
+    radius_m: float,
+    radius_sigma_m: float,
+    calibration_sigmas: tuple[float, float, float] | None = None,
+) -> Belief:
     """The belief over (centre, radius) one detection gives with the radius prior
     N(``radius_m``, ``radius_sigma_m``²): the centre on the ray of its bearing, at the range
     ρ = r / sin α its apparent size gives with that radius; covariance by first-order
     propagation of the measurement's noise and the radius' spread (so range and radius are
     correlated, and the range is as uncertain as the radius is relatively).
+
+    ``calibration_sigmas``: σ of the camera's calibration biases (δy, δz [rad], ε), when the
+    state carries them (7,): they are appended at 0, and the centre's covariance takes their
+    spread too, correlated with them (the detector measured ((u + δy)/(1 + ε), (v + δz)/(1 + ε),
+    atan(tan α/(1 + ε))): :mod:`bve_mj.estimation.models`).
 
     Raises:
         EstimationError: if the measurement is not a fruit in front of the camera.
@@ -82,12 +92,26 @@ def belief_from_detection(sighting: Sighting, radius_m: float, radius_sigma_m: f
     J[:3, 2] = R @ b * (-radius_m * math.cos(alpha) / math.sin(alpha) ** 2)
     J[:3, 3] = R @ b / math.sin(alpha)
     J[3, 3] = 1.0
-    noise = np.zeros((4, 4))
+    extra = () if calibration_sigmas is None else tuple(float(x) for x in calibration_sigmas)
+    if extra and (len(extra) != 3 or not all(math.isfinite(x) and x > 0.0 for x in extra)):
+        raise EstimationError(f"calibration sigmas must be 3 numbers > 0, got {calibration_sigmas!r}")
+    dim = 4 + len(extra)
+    if extra:
+        # the true (u, v, α) at biases (δy, δz, ε) near 0: u = z_u (1 + ε) - δy, v likewise,
+        # tan α = tan z_α (1 + ε): ∂u/∂δy = -1, ∂u/∂ε = z_u, ∂α/∂ε = sin α cos α
+        J = np.pad(J, ((0, 3), (0, 3)))
+        J[:3, 4] = -J[:3, 0]
+        J[:3, 5] = -J[:3, 1]
+        J[:3, 6] = u * J[:3, 0] + v * J[:3, 1] + math.sin(alpha) * math.cos(alpha) * J[:3, 2]
+        J[4:, 4:] = np.eye(3)
+    noise = np.zeros((dim, dim))
     noise[:3, :3] = np.asarray(m.noise_cov_z, dtype=float)
     noise[3, 3] = radius_sigma_m**2
+    if extra:
+        noise[4:, 4:] = np.diag(np.square(extra))
     cov = J @ noise @ J.T
-    cov += np.eye(4) * 1e-12  # the across-ray block is tiny but must stay definite
-    return Belief(np.concatenate([centre, [radius_m]]), cov)
+    cov += np.eye(dim) * 1e-12  # the across-ray block is tiny but must stay definite
+    return Belief(np.concatenate([centre, [radius_m], np.zeros(len(extra))]), cov)
 
 
 def _innovation(belief: Belief, s: Sighting) -> tuple[float, float]:

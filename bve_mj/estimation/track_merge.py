@@ -30,24 +30,29 @@ __all__ = ["fused_belief", "merge_duplicates"]
 
 
 def merge_duplicates(
-    tracks: list[Track], radius_prior: tuple[float, float], merge_probability: float, confirm_hits: int
+    tracks: list[Track],
+    radius_prior: tuple[float, float],
+    merge_probability: float,
+    confirm_hits: int,
+    calibration_sigmas: tuple[float, float, float] | None = None,
 ) -> list[tuple[int, int]]:
     """Merge the duplicates among ``tracks`` in place (see the module docstring): the track
     with more detections (the older one on a tie) keeps the other's detections, views and
     viewpoints (confirmed once they number ``confirm_hits``); the other leaves the list.
-    Returns the (dropped id, kept id) pairs in order."""
+    Two tracks agree or not by their (centre, radius): the calibration biases a state may
+    carry are the camera's, not the fruit's. Returns the (dropped id, kept id) pairs in order."""
     merges: list[tuple[int, int]] = []
     limit = nis_threshold(merge_probability, 4)
     merged = True
     while merged:
         merged = False
         for a, b in _pairs(tracks):
-            d = a.belief.mean - b.belief.mean
-            chi2 = float(d @ np.linalg.solve(a.belief.cov + b.belief.cov, d))
+            d = a.belief.mean[:4] - b.belief.mean[:4]
+            chi2 = float(d @ np.linalg.solve(a.belief.cov[:4, :4] + b.belief.cov[:4, :4], d))
             close = float(np.linalg.norm(a.centre_m - b.centre_m)) < 0.5 * (a.radius_m + b.radius_m)
             if chi2 > limit and not close:
                 continue  # two fruit: their fused belief is not needed
-            fused = fused_belief(a.belief, b.belief, radius_prior)
+            fused = fused_belief(a.belief, b.belief, radius_prior, calibration_sigmas)
             both = a.confirmed and b.confirmed
             # two rays from one camera agree near it without crossing at a fruit: tracks
             # with a view in common (two things in one image) never merge by agreement
@@ -71,17 +76,28 @@ def merge_duplicates(
     return merges
 
 
-def fused_belief(a: Belief, b: Belief, radius_prior: tuple[float, float]) -> Belief | None:
+def fused_belief(
+    a: Belief,
+    b: Belief,
+    radius_prior: tuple[float, float],
+    calibration_sigmas: tuple[float, float, float] | None = None,
+) -> Belief | None:
     """The belief of two tracks of one fruit: their information added, the radius prior's
-    (mean, σ) counted once (each holds it). None when it is not positive definite."""
+    (mean, σ) and, in a state that carries them, the calibration biases' N(0, σ²) counted
+    once (each holds them). None when it is not positive definite."""
     r0, sr = radius_prior
-    prior_info = np.zeros((4, 4))
+    n = a.dim
+    prior_info = np.zeros((n, n))
     prior_info[3, 3] = 1.0 / sr**2
+    if n == 7 and calibration_sigmas is not None:
+        prior_info[4:, 4:] = np.diag(1.0 / np.square(calibration_sigmas))
+    prior_mean = np.zeros(n)
+    prior_mean[3] = r0
     try:
         La, Lb = np.linalg.inv(a.cov), np.linalg.inv(b.cov)
         L = La + Lb - prior_info
         P = np.linalg.inv(L)
-        x = P @ (La @ a.mean + Lb @ b.mean - prior_info @ np.array([0.0, 0.0, 0.0, r0]))
+        x = P @ (La @ a.mean + Lb @ b.mean - prior_info @ prior_mean)
         return Belief(x, P)
     except (np.linalg.LinAlgError, EstimationError):
         return None

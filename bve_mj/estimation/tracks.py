@@ -69,7 +69,8 @@ class Track:
 
     Attributes:
         id: unique within an episode, in order of creation.
-        belief: over the centre [m] and radius [m], (4,).
+        belief: over the centre [m] and radius [m], (4,), and the camera's calibration
+            biases (7,) when the tracker carries them.
         hits: detections assigned (the first, which started it, included).
         misses: views that should have seen it (predicted visible) and did not.
         failed: views planned to see it (its turn in the planner) that did not.
@@ -172,6 +173,10 @@ class Tracker:
             camera of ``model`` (the view's) should see (in the image, outline not hidden).
         correlation: how views from nearby directions share their errors (centre, radius);
             None: views are independent.
+        calibration_sigmas: σ of the camera's calibration biases (δy, δz [rad], ε) when the
+            sensor declares them: each track's state then carries them (7,), as the
+            one-target filter's does (each track estimates them from its own detections; a
+            bias left out of the state made tracks claim millimetres they did not have).
     """
 
     def __init__(
@@ -182,8 +187,10 @@ class Tracker:
         update: Callable[..., UpdateResult],
         visible: Callable[[np.ndarray, np.ndarray, BearingSizeModel], np.ndarray],
         correlation: tuple[ViewCorrelation, ViewCorrelation] | None = None,
+        calibration_sigmas: tuple[float, float, float] | None = None,
     ) -> None:
         self.config = config
+        self.calibration_sigmas = calibration_sigmas
         self.zone_centre_m = np.asarray(zone_centre_m, dtype=float).copy()
         self.radius_prior = radius_prior
         self._update = update
@@ -283,7 +290,11 @@ class Tracker:
         events += [
             TrackEvent("merged", dropped, kept)
             for dropped, kept in merge_duplicates(
-                self.tracks, self.radius_prior, self.config.merge_probability, self.config.confirm_hits
+                self.tracks,
+                self.radius_prior,
+                self.config.merge_probability,
+                self.config.confirm_hits,
+                self.calibration_sigmas,
             )
         ]
         for t in list(self.tracks):
@@ -324,7 +335,7 @@ class Tracker:
         centre) and in range."""
         cfg = self.config
         try:
-            belief = belief_from_detection(s, *self.radius_prior)
+            belief = belief_from_detection(s, *self.radius_prior, self.calibration_sigmas)
         except EstimationError:
             return None
         p = s.model.p_world_camera

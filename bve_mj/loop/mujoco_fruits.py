@@ -41,7 +41,7 @@ from bve_mj.loop.fruit_records import FruitsResult, FruitState, FruitsView
 from bve_mj.loop.harvest import HarvestResult, RecordsHarvest, harvest
 from bve_mj.loop.mujoco import INNOVATION_PRIOR_DOF, episode_constraints, episode_settings
 from bve_mj.loop.outcomes import Outcome
-from bve_mj.loop.start import start_episode
+from bve_mj.loop.start import calibration_sigmas, start_episode
 from bve_mj.planning.every_fruit import (
     EveryFruitPlanner,
     FruitTarget,
@@ -334,7 +334,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     sd = s.tracking.zone_m / 2.0
     zone_belief = Belief(np.r_[zone, radius_prior[0]], np.diag([sd**2] * 3 + [radius_prior[1] ** 2]))
     update = filter_update(s.filter.kind, s.filter.ekf_iterations)
-    tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr)
+    tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr, calibration_sigmas(s))
     seen_in_part = Tracker(tracking_config(s.tracking), zone, radius_prior, update, visible)
 
     def known() -> Obstacles:  # the fruit known now (those seen in part: in the work zone)

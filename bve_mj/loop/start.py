@@ -31,6 +31,7 @@ __all__ = [
     "KEPT_SCENES",
     "START_MARGIN",
     "EpisodeStart",
+    "calibration_sigmas",
     "clear_kept_scenes",
     "detection_prior",
     "start_episode",
@@ -205,13 +206,21 @@ def state_prior(centre: Belief, settings: Settings) -> Belief:
     when the sensor declares a calibration error, the camera's biases (principal point as a
     bearing offset σ = ``principal_point_error_px``/f, focal σ = ``focal_error_rel``; a
     small floor keeps the covariance definite when one of them is 0)."""
-    fruit, sensor = settings.fruit, settings.sensor
+    fruit = settings.fruit
     sigma_r = max(fruit.radius_m * fruit.radius_spread_rel / math.sqrt(3.0), 1e-5)
-    biases = None
-    if settings.estimates_calibration:
-        pp = max(sensor.principal_point_error_px / settings.camera.focal_px, 1e-6)
-        biases = (pp, pp, max(sensor.focal_error_rel, 1e-6))
-    return centre.extended(fruit.radius_m, sigma_r, biases)
+    return centre.extended(fruit.radius_m, sigma_r, calibration_sigmas(settings))
+
+
+def calibration_sigmas(settings: Settings) -> tuple[float, float, float] | None:
+    """σ of the camera's calibration biases the state carries (principal point as a bearing
+    offset ``principal_point_error_px``/f each way, focal ``focal_error_rel``; a small floor
+    keeps the covariance definite when one of them is 0), or None when it carries none
+    (:attr:`~bve_mj.config.Settings.estimates_calibration`)."""
+    if not settings.estimates_calibration:
+        return None
+    sensor = settings.sensor
+    pp = max(sensor.principal_point_error_px / settings.camera.focal_px, 1e-6)
+    return (pp, pp, max(sensor.focal_error_rel, 1e-6))
 
 
 @dataclass(frozen=True)
