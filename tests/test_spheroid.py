@@ -197,3 +197,19 @@ def test_the_fits_disagreement_adds_to_the_centre_s_sigma_the_filter_is_given():
     sc, sc_gap = (math.sqrt(c[0, 0]) * F_PX for c in (cov, cov_gap))
     assert sc_gap == pytest.approx(math.hypot(sc, 3.0))
     assert cov_gap[2, 2] == cov[2, 2]  # the apparent radius is as before
+
+
+def test_a_spheroid_fit_that_runs_away_is_refused_without_a_warning():
+    """The outline of a plum cut by its neighbours (`plum_cluster` of the combined scenes,
+    episode 2969978118: 158 rays) sends the fit to an absurd shape: it overflowed on the way,
+    and NumPy printed overflow warnings into `bve-mj scenarios`' output; the fit is refused
+    (None) and says nothing."""
+    import warnings
+    from pathlib import Path
+
+    case = np.load(Path(__file__).parent / "data" / "spheroid_diverges.npz")
+    alpha0, k0, sigma_log, scale = case["params"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fit = fit_spheroid(case["rays"], case["up"], case["axis0"], alpha0, k0, sigma_log, scale)
+    assert fit is None

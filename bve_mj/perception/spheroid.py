@@ -141,10 +141,13 @@ def fit_spheroid(
         return np.vstack([grazing_jacobian(x[:3], math.exp(x[3]), up, rays) / scale_rad, prior_row])
 
     try:
-        sol = least_squares(
-            residuals, x0, jac=jacobian, loss="soft_l1", f_scale=1.0, x_scale="jac", max_nfev=60
-        )
-    except (ValueError, np.linalg.LinAlgError):
+        # a fit that runs away (rays no spheroid near the start explains: a plum cut by its
+        # neighbours) overflows on its way to an absurd shape, refused below: not a warning
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            sol = least_squares(
+                residuals, x0, jac=jacobian, loss="soft_l1", f_scale=1.0, x_scale="jac", max_nfev=60
+            )
+    except (ValueError, OverflowError, np.linalg.LinAlgError):
         return None
     p, k = sol.x[:3], math.exp(float(sol.x[3]))
     n = float(np.linalg.norm(p))
