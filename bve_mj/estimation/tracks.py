@@ -3,7 +3,8 @@
 A view measures every fruit it sees, each as z = (t_y/t_x, t_z/t_x, α) of
 :class:`~bve_mj.estimation.models.BearingSizeModel` (the bearing of its centre and its
 apparent angular radius). The tracker keeps one :class:`Track` per fruit (a belief over its
-centre and radius), and per view:
+centre and radius, and the camera's calibration biases where the sensor declares them), and
+per view:
 
 1. **assigns** the detections to the tracks predicted visible by a globally optimal
    assignment (the Hungarian algorithm, :func:`scipy.optimize.linear_sum_assignment`) on the
