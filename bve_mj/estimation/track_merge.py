@@ -1,8 +1,9 @@
 """Duplicate tracks merged: two tracks that are one fruit (the tracker's step 5,
 :mod:`bve_mj.estimation.tracks`).
 
-Each track's belief is its own detections and the radius prior, so their information adds,
-less the radius prior's counted twice (:func:`fused_belief`). Two tracks are merged when they
+Each track's belief is its own detections and the radius prior (and, in a state that carries
+them, the camera's calibration biases' prior), so their information adds, less the priors
+counted twice (:func:`fused_belief`). Two tracks are merged when they
 agree (χ² of the difference of their states, ``merge_probability``) and, for two confirmed
 tracks, their centres lie closer than a fruit's radius. Two tentative tracks of one fruit are
 two rays that cross at it (each long along its ray), so for them agreement alone decides; two
