@@ -7,6 +7,7 @@ import pytest
 
 from bve_mj.config import FilterConfig
 from bve_mj.estimation import Belief, CameraModel
+from bve_mj.estimation.prior_bound import PriorBound
 from bve_mj.loop.episode import EpisodeLoop
 from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
@@ -93,6 +94,38 @@ def test_a_fruit_localised_beside_another_the_prior_prefers_is_ambiguous(localis
     result = loop.finish(Outcome.CONVERGED)
     assert np.linalg.norm(result.final.mean - localised) < 1e-3
     assert result.outcome == expected
+
+
+@pytest.mark.parametrize(
+    ("localised_m", "expected"),
+    [
+        # 62 mm nearer along the prior's ray than its mean, the bound ±50 mm: a neighbour
+        ([0.438, 0.0, 0.3], Outcome.AMBIGUOUS),
+        # 45 mm nearer: inside the bound, the target as far as the prior can say
+        ([0.455, 0.0, 0.3], Outcome.CONVERGED),
+        # 20 mm across the ray, the bound ±10 mm: a neighbour beside the target
+        ([0.50, 0.02, 0.3], Outcome.AMBIGUOUS),
+    ],
+)
+def test_a_fruit_localised_outside_the_priors_bound_is_ambiguous(localised_m, expected):
+    """The prior is Gaussian, but its error was declared within a box (a first detection's
+    ray: ±e along it, ±l across); a fruit localised outside the box is not the target, however
+    well it is localised: ``ambiguous`` (exit 3), not ``converged``. Without the bound the
+    same episode claims ``converged`` (the Gaussian puts 62 mm at 2.1σ)."""
+    localised = np.array(localised_m)
+    prior = Belief(np.array([0.50, 0.0, 0.3]), np.diag([0.029**2, 0.0058**2, 0.0058**2]))  # along x
+    bound = PriorBound(prior.mean, np.eye(3), np.array([0.05, 0.01, 0.01]))
+    outcomes = []
+    for b in (bound, None):
+        world = _ScriptedWorld(localised, [])
+        loop = EpisodeLoop(world, prior, FilterConfig(gate_probability=None), prior_bound=b)
+        loop.start()
+        for _ in range(3):
+            loop.step(ViewPlan(world.p_world_camera, localised, "optimal", True, 0.0))
+        result = loop.finish(Outcome.CONVERGED)
+        assert np.linalg.norm(result.final.mean - localised) < 1e-3
+        outcomes.append(result.outcome)
+    assert outcomes == [expected, Outcome.CONVERGED]
 
 
 @pytest.mark.parametrize("odds", [0.0, -1.0, float("nan"), float("inf")])

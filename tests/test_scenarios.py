@@ -30,17 +30,36 @@ def test_the_suite_holds_the_named_scenarios_each_described():
 
 COMBINED = "examples/scenarios/combined"
 """Scenes combined from the suite's conditions, outside its calibration: ``--dir`` runs them."""
+STRESS = "examples/scenarios/stress"
+"""Scenes written after those, to find what breaks: a flash, dim light, flat beefsteak and
+cocktail clusters, small fruit for the class, the row at the end of the reach ..."""
 
 
-def test_the_combined_scenes_load_each_described_and_compile():
-    combined = load_suite(COMBINED)
-    assert len(combined) == 8 and not {s.name for s in combined} & {s.name for s in load_suite()}
+@pytest.mark.parametrize(("folder", "count"), [(COMBINED, 8), (STRESS, 8)])
+def test_the_scenes_outside_the_suite_load_each_described_and_compile(folder, count):
+    scenes = load_suite(folder)
+    assert len(scenes) == count and not {s.name for s in scenes} & {s.name for s in load_suite()}
     kin = arm_kinematics("manipulator_h", "emanual")
-    for sc in combined:
+    for sc in scenes:
         assert len(sc.description) > 20
         s = sc.settings()
         spec, info = build_scene(kin, s.scene, np.random.default_rng(0), s.camera)
         assert spec.compile().ngeom > 0 and info.target.colour == "red", sc.name
+
+
+def test_a_neighbour_localised_in_place_of_a_hidden_target_is_not_claimed():
+    """A flat beefsteak cluster (``stress/flat_beefsteak_cluster``, episode 2946969758): the
+    target hides behind a red neighbour 62 mm nearer along the first detection's ray, beyond
+    the prior's declared ±50 mm; the views measure and localise the neighbour to a
+    millimetre. The episode must not claim it: ``ambiguous``, not ``converged`` (it did, 67.5
+    mm off, NEES 30,872, before the prior's bound was checked)."""
+    (scenario,) = load_suite(STRESS, only=["flat_beefsteak_cluster"])
+    ep = run_mujoco_episode(scenario.settings(), 2946969758)
+    final, outcome = ep.result.final, ep.result.outcome
+    error_mm = 1e3 * float(np.linalg.norm(final.centre_m - ep.truth))
+    assert not (outcome.success and final.mahalanobis_sq(ep.truth) > SILENT_NEES)
+    if error_mm > 20.0:  # the neighbour, as when this was written
+        assert outcome == "ambiguous"
 
 
 @pytest.mark.parametrize("name", sorted(REQUIRED))

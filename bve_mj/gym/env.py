@@ -143,7 +143,8 @@ class ViewPlanningEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._q_start = start.q_start.copy()
         p = self._parts
         self._loop = EpisodeLoop(
-            p.loop_world, start.prior, self.settings.filter, p.planner, None, p.claims, p.correlation
+            p.loop_world, start.prior, self.settings.filter, p.planner, None, p.claims, p.correlation,
+            prior_bound=start.prior_bound,
         )  # fmt: skip
         record = self._loop.start()
         return self._observation(), self._info(record)

@@ -13,6 +13,7 @@ import numpy as np
 from bve_mj.config import FilterConfig
 from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation import Belief, UpdateResult, filter_update, predict
+from bve_mj.estimation.prior_bound import PriorBound
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
 from bve_mj.geometry import unit
 from bve_mj.loop.claims import Claims
@@ -45,6 +46,7 @@ def run_episode(
     claims: Claims | None = None,
     correlation: tuple[ViewCorrelation, ViewCorrelation] | None = None,
     identity_odds: float = 1.0,
+    prior_bound: PriorBound | None = None,
 ) -> EpisodeResult:
     """Observe from the start pose, then up to ``steps`` times: plan, move, predict, observe,
     update; ``stop`` may end it early. Outcome: the rule that ended it, "max_views", or
@@ -56,7 +58,9 @@ def run_episode(
     all but excludes (:mod:`bve_mj.loop.verdict`); "ambiguous" too when a view found two
     fruit the estimate allowed, and the prior finds the other at least ``identity_odds``
     times as likely to be the target as the fruit localised (default 1: the prior prefers
-    the other).
+    the other); and "ambiguous" when the fruit localised lies outside ``prior_bound`` (the
+    box the prior's error is declared to stay in, :class:`PriorBound`) by more than its own
+    3.29σ: a neighbour, not the target the prior meant.
 
     While a view's dispute with the belief stands (:meth:`StopRules.standing_dispute`), a
     planner that learns from failed views is told of the disputing view as one: a view from
@@ -84,7 +88,9 @@ def run_episode(
         EstimationError: naming the view, when a measurement would put NaN or infinite
             values into the belief (it never does).
     """
-    loop = EpisodeLoop(world, prior, filter_config, planner, on_view, claims, correlation, identity_odds)
+    loop = EpisodeLoop(
+        world, prior, filter_config, planner, on_view, claims, correlation, identity_odds, prior_bound
+    )  # fmt: skip
     loop.start()
     outcome: Outcome | None = None
     noted: ViewRecord | None = None
@@ -133,11 +139,12 @@ class EpisodeLoop:
         claims: Claims | None = None,
         correlation: tuple[ViewCorrelation, ViewCorrelation] | None = None,
         identity_odds: float = 1.0,
+        prior_bound: PriorBound | None = None,
     ) -> None:
         if not (math.isfinite(identity_odds) and identity_odds > 0.0):
             raise ValueError(f"identity_odds: got {identity_odds!r}; allowed: a finite number > 0")
         self.world, self.prior, self.planner = world, prior, planner
-        self.identity_odds = identity_odds
+        self.identity_odds, self.prior_bound = identity_odds, prior_bound
         self.on_view, self.claims, self.correlation = on_view, claims, correlation
         self.filter_config = filter_config
         self._t0 = time.perf_counter()
@@ -185,7 +192,10 @@ class EpisodeLoop:
         ):
             outcome = Outcome.UNRELIABLE
         odds = self.identity_odds
-        if outcome.localised and another_fruit_fits_the_prior(self.prior, belief, views, odds):
+        if outcome.localised and (
+            another_fruit_fits_the_prior(self.prior, belief, views, odds)
+            or (self.prior_bound is not None and self.prior_bound.excludes(views[-1].belief))
+        ):
             outcome = Outcome.AMBIGUOUS
         return EpisodeResult(self.prior, tuple(views), time.perf_counter() - self._t0, outcome)
 

@@ -281,7 +281,7 @@ def _run(
         on_view = None if recorder is None else recorder.on_view
         result = run_episode(
             parts.loop_world, parts.planner, prior, s.filter, s.episode.views, parts.stop, on_view,
-            parts.claims, parts.correlation,
+            parts.claims, parts.correlation, prior_bound=start.prior_bound,
         )  # fmt: skip
     finally:
         parts.world.close()

@@ -28,8 +28,9 @@ class Outcome(StrEnum):
     NEVER_DETECTED = "never_detected"
     """No view detected the fruit."""
     AMBIGUOUS = "ambiguous"
-    """No view told the target apart from a neighbour (nothing measured, or a fruit localised
-    that fits the prior no better than another one seen)."""
+    """No view told the target apart from a neighbour (nothing measured, a fruit localised
+    that fits the prior no better than another one seen, or one outside the prior's declared
+    bound: a neighbour, not the target)."""
     UNREACHABLE = "unreachable"
     """The arm cannot reach a pose that looks at the fruit."""
     INCOMPLETE = "incomplete"
@@ -63,8 +64,9 @@ _NOTES = {
     "measured",
     Outcome.NEVER_DETECTED: "no view detected the fruit: the estimate is the prior",
     Outcome.AMBIGUOUS: "more than one fruit in view fits the estimate about equally well, and no view "
-    "told which one is the target: the estimate is the prior, or a fruit that fits the prior no "
-    "better than another one seen (maybe not the target)",
+    "told which one is the target: the estimate is the prior, a fruit that fits the prior no "
+    "better than another one seen (maybe not the target), or a fruit outside the prior's declared "
+    "error bound (episode.initial_error_m: not the target, which the views may not have shown)",
     Outcome.APPROACH_BLOCKED: "the arm found no reachable pose closer to the fruit (the camera stopped "
     "moving): the fruit is localised but not approached",
     Outcome.UNRELIABLE: "the final estimate is not supported by the measurements (fewer than two "

@@ -21,6 +21,7 @@ from bve_mj.config import CameraConfig, EpisodeConfig, RobotConfig, SceneConfig,
 from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.noise import NoiseModel, load_noise_model
+from bve_mj.estimation.prior_bound import PriorBound
 from bve_mj.geometry import ray_frame
 from bve_mj.robot import ArmKinematics, IkOptions, arm_kinematics, look_at_ik
 from bve_mj.robot.ik import image_roll_rad, look_at_residuals
@@ -34,6 +35,7 @@ __all__ = [
     "calibration_sigmas",
     "clear_kept_scenes",
     "detection_prior",
+    "detection_prior_bounded",
     "start_episode",
     "state_prior",
 ]
@@ -191,13 +193,27 @@ def detection_prior(
     (l = :meth:`EpisodeConfig.lateral_error_m` of the assumed ``fruit_radius_m``); covariance
     with those uniforms' σ along and across the ray (at least 1 mm). It says which fruit is
     meant, where a cube around the fruit, in a truss, does not."""
+    return detection_prior_bounded(p_world_camera, truth, ep, rng, fruit_radius_m)[0]
+
+
+def detection_prior_bounded(
+    p_world_camera: np.ndarray,
+    truth: np.ndarray,
+    ep: EpisodeConfig,
+    rng: np.random.Generator,
+    fruit_radius_m: float,
+) -> tuple[Belief, PriorBound]:
+    """:func:`detection_prior` and the bound it was drawn within: the box ±e along the ray,
+    ±l across it, about the prior's mean (the target lies in it)."""
     ray = truth - p_world_camera
     rho = float(np.linalg.norm(ray))
     U = ray_frame(ray / rho)
     e, lat = ep.initial_error_m, ep.lateral_error_m(fruit_radius_m)
-    offset = rng.uniform(-1.0, 1.0, 3) * np.array([e, lat, lat])
-    sigmas = np.maximum(np.array([e, lat, lat]) / math.sqrt(3.0), 1e-3)
-    return Belief(truth + U @ offset, U @ np.diag(sigmas**2) @ U.T)
+    half = np.array([e, lat, lat])
+    offset = rng.uniform(-1.0, 1.0, 3) * half
+    sigmas = np.maximum(half / math.sqrt(3.0), 1e-3)
+    mean = truth + U @ offset
+    return Belief(mean, U @ np.diag(sigmas**2) @ U.T), PriorBound(mean, U, half)
 
 
 def state_prior(centre: Belief, settings: Settings) -> Belief:
@@ -235,6 +251,8 @@ class EpisodeStart:
         prior: the episode's prior (over the centre, and the radius when it is in the state).
         noise: the detector's calibrated noise (with the radius in the state), else None.
         sensor_ss, planner_ss, fault_ss: the seed streams of the sensors, planner, faults.
+        prior_bound: the box the prior's error was drawn within (the target lies in it);
+            None where there is no prior (unreachable).
     """
 
     settings: Settings
@@ -248,6 +266,7 @@ class EpisodeStart:
     sensor_ss: np.random.SeedSequence
     planner_ss: np.random.SeedSequence
     fault_ss: np.random.SeedSequence
+    prior_bound: PriorBound | None = None
 
 
 def start_episode(
@@ -289,10 +308,10 @@ def start_episode(
     except PlanningError:  # the fruit is out of the arm's reach: a clear outcome, not a crash
         return EpisodeStart(s, kin, model, info, None, cube, cube, noise, *streams)
     if ep.prior == "cube":
-        prior = cube
+        prior, bound = cube, PriorBound.cube(coarse, ep.initial_error_m)
     else:
         p_camera = kin.camera_pose(q_start)[0]
-        prior = detection_prior(p_camera, truth, ep, prior_rng, s.fruit.radius_m)
+        prior, bound = detection_prior_bounded(p_camera, truth, ep, prior_rng, s.fruit.radius_m)
     if s.filter.state == "centre_radius":
         prior = state_prior(prior, s)
-    return EpisodeStart(s, kin, model, info, q_start, cube, prior, noise, *streams)
+    return EpisodeStart(s, kin, model, info, q_start, cube, prior, noise, *streams, prior_bound=bound)
