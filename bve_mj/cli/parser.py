@@ -102,7 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--initial-error",
         default=None,
         help="prior error half-width e [m]: along the ray (episode.prior = detection) or per axis "
-        "(cube); default 0.05",
+        "(cube); a fruit localised beyond it is not the target (ambiguous); default 0.05",
     )
 
     for name, helptext, desc in (

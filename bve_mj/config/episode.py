@@ -286,7 +286,11 @@ class EpisodeConfig:
     )
     initial_error_m: float = field(
         default=0.05,
-        metadata=_why("e: the prior's range error (detection) or error per axis (cube)", "m"),
+        metadata=_why(
+            "e: the prior's range error (detection) or error per axis (cube), at most: a fruit "
+            "localised beyond it is not the target (the episode ends ambiguous)",
+            "m",
+        ),
     )
     initial_lateral_error_m: float | None = field(
         default=None,
