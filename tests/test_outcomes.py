@@ -125,6 +125,8 @@ def test_a_fruit_localised_outside_the_priors_bound_is_ambiguous(localised_m, ex
         result = loop.finish(Outcome.CONVERGED)
         assert np.linalg.norm(result.final.mean - localised) < 1e-3
         outcomes.append(result.outcome)
+        said = result.views[-1].has("outside_prior_bound")
+        assert said == (b is not None and expected == Outcome.AMBIGUOUS)  # the last view says why
     assert outcomes == [expected, Outcome.CONVERGED]
 
 
@@ -181,3 +183,23 @@ def test_a_gated_out_view_that_makes_an_equally_supported_answer_makes_it_unreli
     assert [v.accepted for v in loop.views] == [True, False, True, True]
     result = loop.finish(Outcome.CONVERGED)
     assert result.outcome == expected
+
+
+def test_an_episodes_json_keeps_the_loops_events_where_the_world_reported_its_own():
+    """The loop's events of a view hold the world's (``ambiguous``) and its own (here
+    ``stall_escaped``, ``outside_prior_bound``); the JSON writes the loop's list, not the
+    world's, which used to overwrite it."""
+    from bve_mj.config import Settings
+    from bve_mj.loop.mujoco import MujocoEpisode
+    from bve_mj.loop.records import EpisodeResult, ViewRecord
+    from bve_mj.sim.scene_model import Fruit, SceneInfo
+
+    belief = Belief(np.array([0.5, 0.0, 0.3]), np.eye(3) * 1e-6)
+    events = (Event("ambiguous"), Event("stall_escaped"), Event("outside_prior_bound", "4.0 sigma"))
+    view = ViewRecord(0, np.zeros(3), None, True, 0.0, False, False, float("nan"), belief,
+                      world={"events": ["ambiguous"]}, events=events)  # fmt: skip
+    info = SceneInfo(Fruit("target", np.array([0.5, 0.0, 0.3]), 0.03, "red"), (), 0, 0)
+    result = EpisodeResult(belief, (view,), 0.0, Outcome.AMBIGUOUS)
+    doc = MujocoEpisode(result, info, Settings(), 0, np.zeros(6)).to_json()
+    assert doc["views"][0]["events"] == ["ambiguous", "stall_escaped", "outside_prior_bound: 4.0 sigma"]
+    json.dumps(doc)

@@ -52,7 +52,8 @@ def test_a_neighbour_localised_in_place_of_a_hidden_target_is_not_claimed():
     target hides behind a red neighbour 62 mm nearer along the first detection's ray, beyond
     the prior's declared ±50 mm; the views measure and localise the neighbour to a
     millimetre. The episode must not claim it: ``ambiguous``, not ``converged`` (it did, 67.5
-    mm off, NEES 30,872, before the prior's bound was checked)."""
+    mm off, NEES 30,872, before the prior's bound was checked), the last view's event
+    ``outside_prior_bound`` saying why."""
     (scenario,) = load_suite(STRESS, only=["flat_beefsteak_cluster"])
     ep = run_mujoco_episode(scenario.settings(), 2946969758)
     final, outcome = ep.result.final, ep.result.outcome
@@ -60,6 +61,8 @@ def test_a_neighbour_localised_in_place_of_a_hidden_target_is_not_claimed():
     assert not (outcome.success and final.mahalanobis_sq(ep.truth) > SILENT_NEES)
     if error_mm > 20.0:  # the neighbour, as when this was written
         assert outcome == "ambiguous"
+        said = ep.to_json()["views"][-1]["events"]  # and its JSON says why
+        assert any(e.startswith("outside_prior_bound") for e in said), said
 
 
 @pytest.mark.parametrize("name", sorted(REQUIRED))

@@ -192,10 +192,12 @@ class EpisodeLoop:
         ):
             outcome = Outcome.UNRELIABLE
         odds = self.identity_odds
-        if outcome.localised and (
-            another_fruit_fits_the_prior(self.prior, belief, views, odds)
-            or (self.prior_bound is not None and self.prior_bound.excludes(views[-1].belief))
-        ):
+        if outcome.localised and self.prior_bound is not None and self.prior_bound.excludes(views[-1].belief):
+            excess = self.prior_bound.excess_sigmas(views[-1].belief)
+            note = Event("outside_prior_bound", f"{excess:.1f} sigma beyond the prior's declared error bound")
+            views[-1] = dataclasses.replace(views[-1], events=(*views[-1].events, note))
+            outcome = Outcome.AMBIGUOUS
+        if outcome.localised and another_fruit_fits_the_prior(self.prior, belief, views, odds):
             outcome = Outcome.AMBIGUOUS
         return EpisodeResult(self.prior, tuple(views), time.perf_counter() - self._t0, outcome)
 

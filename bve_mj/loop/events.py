@@ -22,6 +22,7 @@ EventKind = Literal[
     "zone_unframed",  # --fruits all: a view aimed at a part of the zone not yet framed framed none of it
     "retreated",  # --fruits all: the planner found no view, and the camera drew back towards the aisle
     "stall_escaped",  # the camera had stalled: the planner was told that view is spent, and planned this one
+    "outside_prior_bound",  # the fruit localised lies outside the prior's declared bound: not the target
 ]
 
 

@@ -160,13 +160,14 @@ class MujocoEpisode:
                     "measured": v.measured,
                     "accepted": v.accepted,
                     "nis": None if math.isnan(v.nis) else v.nis,
-                    "events": [str(e) for e in v.events],
                     "estimate_m": v.belief.centre_m.tolist(),
                     "covariance_m2": v.belief.cov[:3, :3].tolist(),
                     "error_mm": 1e3 * float(np.linalg.norm(v.belief.centre_m - self.truth)),
                     "truth_m": self.truth.tolist(),
                     **self._radius_json(v.belief),
                     **(v.world or {}),
+                    # the loop's events (the world's among them) over the world's own list
+                    "events": [str(e) for e in v.events],
                 }
             )
         final = self.result.final
