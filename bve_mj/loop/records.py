@@ -21,7 +21,8 @@ class ViewRecord:
 
     ``iteration`` 0 is the view from the start pose (no plan: status None). ``events``: what
     went wrong and how it was handled (:class:`~bve_mj.loop.events.Event`: ``planner_failed``
-    with its reason, ``ik_failed``, ``belief_reset``, ``ambiguous``, and injected faults:
+    with its reason, ``ik_failed``, ``belief_reset``, ``ambiguous``, ``outside_prior_bound`` on
+    the last view of an episode whose fruit lies outside the prior's bound, and injected faults:
     ``dropped``, ``false_detection``, ``outlier``, ``ik_failure``). ``belief`` is what the
     episode claims; ``filter_belief`` the filter's own, where the claim differs from it
     (:class:`~bve_mj.loop.claims.Claims`: the fruit's own offset, the innovation, refusal and
