@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import multiprocessing
+import os
+import signal
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, TypeVar
@@ -14,6 +19,8 @@ from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.errors import ConfigError
 
 __all__ = ["Task", "chunks", "local_batches", "run_task"]
+
+_PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent dies
 
 # --------------------------------------------------------------------------- execution
 Task = tuple[Settings, tuple[tuple[Cell, int], ...], int]
@@ -48,7 +55,12 @@ def local_batches(
         yield from map(run, tasks)
         return
     # spawn, not fork: a forked child inherits the parent's EGL/OpenGL state and can deadlock
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    pool = ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_die_with_parent,
+        initargs=(os.getpid(),),
+    )
     try:
         pending: set[Future[list[dict[str, Any]]]] = {pool.submit(run, t) for t in tasks}
         while pending:
@@ -57,6 +69,17 @@ def local_batches(
                 yield fut.result()
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """A pool worker ends when the process that started it dies (Linux: SIGTERM on the
+    parent's death), so a run killed outright (SIGTERM or SIGKILL, which no ``finally`` sees)
+    leaves no orphans rendering on to the end of their chunk."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):  # no prctl: it ends when its chunk does
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() != parent_pid:  # the parent died before the watch was set
+        os._exit(1)
 
 
 def _dask_batches(tasks: list[Task], scheduler: str) -> Iterator[list[dict[str, Any]]]:
