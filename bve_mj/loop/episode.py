@@ -21,7 +21,7 @@ from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.loop.records import EpisodeResult, ViewRecord
 from bve_mj.loop.stops import StopRules, supported
-from bve_mj.loop.verdict import another_fruit_fits_the_prior, contested, second_answer
+from bve_mj.loop.verdict import another_fruit_fits_the_prior, contested, outside_prior_bound, second_answer
 from bve_mj.planning.plan import (
     LearnsFromFailedViews,
     LearnsFromFusedViews,
@@ -192,10 +192,9 @@ class EpisodeLoop:
         ):
             outcome = Outcome.UNRELIABLE
         odds = self.identity_odds
-        if outcome.localised and self.prior_bound is not None and self.prior_bound.excludes(views[-1].belief):
-            excess = self.prior_bound.excess_sigmas(views[-1].belief)
-            note = Event("outside_prior_bound", f"{excess:.1f} sigma beyond the prior's declared error bound")
-            views[-1] = dataclasses.replace(views[-1], events=(*views[-1].events, note))
+        beyond = outside_prior_bound(self.prior_bound, views[-1].belief) if outcome.localised else None
+        if beyond is not None:
+            views[-1] = dataclasses.replace(views[-1], events=(*views[-1].events, beyond))
             outcome = Outcome.AMBIGUOUS
         if outcome.localised and another_fruit_fits_the_prior(self.prior, belief, views, odds):
             outcome = Outcome.AMBIGUOUS

@@ -1,6 +1,7 @@
 """Whether an episode's final estimate is what its views say: the checks an outcome must pass
 before it stands (:meth:`bve_mj.loop.episode.EpisodeLoop.finish`): the measurements it gated
-out hold no second answer, and the fruit it localised is the one the prior meant."""
+out hold no second answer, and the fruit it localised is the one the prior meant (inside the
+prior's declared bound, and no other fruit seen that the prior prefers)."""
 
 from __future__ import annotations
 
@@ -12,10 +13,12 @@ import numpy as np
 
 from bve_mj.estimation import Belief, UpdateResult
 from bve_mj.estimation.metrics import chi2_quantile
+from bve_mj.estimation.prior_bound import OUTSIDE_Z, PriorBound
+from bve_mj.loop.events import Event
 from bve_mj.loop.records import ViewRecord
 from bve_mj.sim.world import Observation
 
-__all__ = ["another_fruit_fits_the_prior", "contested", "second_answer"]
+__all__ = ["another_fruit_fits_the_prior", "contested", "outside_prior_bound", "second_answer"]
 
 
 def contested(
@@ -84,6 +87,19 @@ def second_answer(
         if support >= len(accepted) and float(d @ np.linalg.solve(f.cov, d)) > excluded:
             return True
     return False
+
+
+def outside_prior_bound(bound: PriorBound | None, claimed: Belief) -> Event | None:
+    """The event ``outside_prior_bound`` when the claimed centre lies outside the box the
+    prior's error is declared to stay in by more than :data:`OUTSIDE_Z` of its own σ on one
+    of the box's axes (:class:`PriorBound`: a neighbour, not the target the prior meant);
+    None inside it, or without a bound."""
+    if bound is None:
+        return None
+    excess = bound.excess_sigmas(claimed)
+    if excess <= OUTSIDE_Z:
+        return None
+    return Event("outside_prior_bound", f"{excess:.1f} sigma beyond the prior's declared error bound")
 
 
 def another_fruit_fits_the_prior(
