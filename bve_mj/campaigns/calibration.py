@@ -291,6 +291,7 @@ class CalibrationData:
     views: int
     seed: int
     wall_s: float
+    drawn: int = 0
 
     @property
     def detections(self) -> list[dict[str, Any]]:
@@ -306,9 +307,13 @@ def run_calibration(
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     every_fruit: bool = False,
+    drawn: Sequence[Scenario] = (),
 ) -> CalibrationData:
-    """``views`` views of ``scenes`` seeded scenes of every scenario, in spawned workers
-    (with ``every_fruit``, the every-fruit detector's rows too: :func:`sample_views`)."""
+    """``views`` views of ``scenes`` seeded scenes of every scenario, and of one scene of each
+    ``drawn`` scenario (configurations drawn at random, :mod:`bve_mj.campaigns.drawn_scenes`:
+    each is its own configuration, so one scene of each spreads the views over more of
+    them), in spawned workers (with ``every_fruit``, the every-fruit detector's rows too:
+    :func:`sample_views`)."""
     from bve_mj.campaigns.executors import local_batches
     from bve_mj.campaigns.spec import episode_seed
 
@@ -323,7 +328,7 @@ def run_calibration(
         (sc.name, sc.settings("camera"), episode_seed(seed, k), views, every_fruit)
         for sc in scenarios
         for k in range(scenes)
-    ]
+    ] + [(sc.name, sc.settings("camera"), episode_seed(seed, 0), views, every_fruit) for sc in drawn]
     rows: list[dict[str, Any]] = []
     if progress is not None:
         progress(0, len(tasks))
@@ -333,8 +338,9 @@ def run_calibration(
             progress(done, len(tasks))
     rows.sort(key=lambda r: (r["scenario"], r["scene_seed"], r["view"]))
     return CalibrationData(
-        tuple(rows), tuple(sc.name for sc in scenarios), scenes, views, seed, time.perf_counter() - t0
-    )
+        tuple(rows), tuple(sc.name for sc in scenarios), scenes, views, seed, time.perf_counter() - t0,
+        len(drawn),
+    )  # fmt: skip
 
 
 def calibrate(
@@ -346,6 +352,7 @@ def calibrate(
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     every_fruit: bool = False,
+    drawn: Sequence[Scenario] = (),
 ) -> tuple[NoiseModel, dict[str, Any], CalibrationData]:
     """Render and detect (:func:`run_calibration`), then fit the noise model
     (:func:`~bve_mj.estimation.noise_fit.fit_noise_model`): the model, how well it describes the
@@ -353,16 +360,18 @@ def calibrate(
     (seeds 0 and 7777 there) out of the calibration."""
     data = run_calibration(
         scenarios, scenes=scenes, views=views, seed=seed, workers=workers, progress=progress,
-        every_fruit=every_fruit,
+        every_fruit=every_fruit, drawn=drawn,
     )  # fmt: skip
     camera = scenarios[0].settings("camera").camera
-    for sc in scenarios[1:]:
+    for sc in [*scenarios[1:], *drawn]:
         if sc.settings("camera").camera != camera:
             raise ConfigError(
                 "scenarios", sc.name, "scenarios that share one camera (the model is per camera)"
             )
     names = ",".join(data.scenarios)
     source = f"bve-mj calibrate: scenarios {names}; {scenes} scenes x {views} views each, seed {seed}"
+    if drawn:
+        source += f"; {len(drawn)} drawn scenes ({drawn[0].name}, ...), one scene each"
     if every_fruit:
         source += "; every fruit"
     model, report = fit_noise_model(data.rows, camera, source)  # the refusals fit the refusal scale

@@ -21,7 +21,7 @@ from bve_mj.cli.campaign import cmd_campaign, cmd_results
 from bve_mj.cli.episode import cmd_episode
 from bve_mj.cli.paper import cmd_paper
 from bve_mj.cli.parser import build_parser
-from bve_mj.cli.scene import cmd_scene
+from bve_mj.cli.scene import cmd_draw_scenes, cmd_scene
 from bve_mj.cli.suite import cmd_calibrate, cmd_scenarios
 
 __all__ = ["COMMANDS", "main"]
@@ -35,6 +35,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "scenarios": cmd_scenarios,
     "calibrate": cmd_calibrate,
     "scene": cmd_scene,
+    "draw-scenes": cmd_draw_scenes,
 }
 """Each command's implementation (the parser, :func:`build_parser`, defines its options)."""
 

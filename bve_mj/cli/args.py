@@ -72,7 +72,14 @@ def version_text() -> str:
         return "unknown (not installed)"
 
 
-INT_MAXIMA = {"seed": 2**63 - 1, "workers": 1024, "views": 10_000, "steps": 10_000}
+INT_MAXIMA = {
+    "seed": 2**63 - 1,
+    "workers": 1024,
+    "views": 10_000,
+    "steps": 10_000,
+    "count": 10_000,
+    "drawn": 10_000,
+}
 """The largest value of each integer option; every other count (runs, seeds, scenes) at most
 ``MAX_RUNS``: a mistyped ``--runs 1000000000000`` is an error, not a run that never ends."""
 MAX_RUNS = 100_000

@@ -216,6 +216,12 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--only", default=None, help="comma-separated scenario names (default: all)")
     cal.add_argument("--dir", default=None, help="a folder of scenario TOML files instead of the suite")
     cal.add_argument("--scenes", default="8", help="seeded scenes per scenario (default 8)")
+    cal.add_argument(
+        "--drawn",
+        default="0",
+        help="also this many scene configurations drawn at random (bve-mj draw-scenes, the draw "
+        "seeded by --seed), one scene of each (default 0)",
+    )
     cal.add_argument("--views", default="25", help="views per scene (default 25)")
     cal.add_argument("--seed", default="1", help="base seed (default 1: not the suite's 0)")
     cal.add_argument("--workers", default=None, help="local processes (default: all cores)")
@@ -256,4 +262,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--config", default=None, metavar="X.toml", help="scenario TOML (sections of bve_mj.config.Settings)"
     )
     scn.add_argument("--out", required=True, metavar="DIR", help="the folder to write (created)")
+    drw = sub.add_parser(
+        "draw-scenes",
+        help="write scenario files of greenhouse configurations drawn at random (scenes nobody tuned for)",
+        description="Draw COUNT configurations (fruit type, truss, ripeness, leaves, light, flash, "
+        "sensor) from the scene space of bve_mj.campaigns.drawn_scenes and write each as a scenario "
+        "file DIR/drawn_SEED_I.toml: bve-mj scenarios --dir DIR runs them. The same seed writes the "
+        "same files; a file already there is never overwritten.",
+    )
+    drw.add_argument("--count", default="20", metavar="N", help="configurations to draw (default 20)")
+    drw.add_argument("--seed", default="0", metavar="S", help="the draw's seed (default 0)")
+    drw.add_argument("--out", required=True, metavar="DIR", help="the folder to write them in (created)")
     return parser

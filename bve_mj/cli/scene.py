@@ -1,4 +1,5 @@
-"""``bve-mj scene``: an episode's greenhouse as an MJCF folder to open in MuJoCo's viewer."""
+"""``bve-mj scene``: an episode's greenhouse as an MJCF folder to open in MuJoCo's viewer;
+``bve-mj draw-scenes``: scenario files of configurations drawn at random."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import argparse
 
 from bve_mj.cli.args import EXIT_OK, int_arg
 
-__all__ = ["cmd_scene"]
+__all__ = ["cmd_draw_scenes", "cmd_scene"]
 
 
 def cmd_scene(args: argparse.Namespace) -> int:
@@ -27,4 +28,17 @@ def cmd_scene(args: argparse.Namespace) -> int:
     for path in written:
         print(f"wrote {path} ({path.stat().st_size / 1e3:.0f} kB)")
     print(f"open it: python -m mujoco.viewer --mjcf={scene}")
+    return EXIT_OK
+
+
+def cmd_draw_scenes(args: argparse.Namespace) -> int:
+    from bve_mj.campaigns.drawn_scenes import write_drawn_scenes
+
+    count = int_arg("count", args.count, 1) or 1
+    seed = int_arg("seed", args.seed, 0) or 0
+    paths = write_drawn_scenes(args.out, count, seed)
+    print(f"bve-mj draw-scenes: {count} configurations (seed {seed}) written to {paths[0].parent}")
+    for path in paths:
+        print(f"  {path.name}: {path.read_text(encoding='utf-8').splitlines()[0].lstrip('# ')}")
+    print(f"run them: bve-mj scenarios --dir {paths[0].parent} --seeds 4")
     return EXIT_OK

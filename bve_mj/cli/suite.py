@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast, get_args
 
@@ -141,6 +142,7 @@ def _exit_status(crashed: list[str]) -> int:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from bve_mj.campaigns.calibration import calibrate
+    from bve_mj.campaigns.drawn_scenes import write_drawn_scenes
     from bve_mj.campaigns.scenarios import load_suite
     from bve_mj.errors import ConfigError
 
@@ -153,13 +155,20 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".json":
         raise ConfigError("out", args.out, "a path ending in .json")
     json_path = check_output_path("json", args.json)
+    drawn_count = int_arg("drawn", args.drawn, 0) or 0
     suite = load_suite(args.dir, args.only.split(",") if args.only is not None else None)
-    print(f"bve-mj calibrate: {len(suite)} scenarios x {scenes} scenes x {views} views (base seed {seed})")
+    also = f" + {drawn_count} drawn scenes (draw seed {seed}) x 1 scene" if drawn_count else ""
+    print(
+        f"bve-mj calibrate: {len(suite)} scenarios x {scenes} scenes{also}, {views} views each "
+        f"(base seed {seed})"
+    )
     show = not args.quiet and sys.stderr.isatty()
-    model, report, data = calibrate(
-        suite, scenes=scenes, views=views, seed=seed, workers=workers, progress=progress_printer(show),
-        every_fruit=args.every_fruit,
-    )  # fmt: skip
+    with tempfile.TemporaryDirectory(prefix="bve_mj_drawn_") as folder:
+        drawn = load_suite(write_drawn_scenes(folder, drawn_count, seed)[0].parent) if drawn_count else []
+        model, report, data = calibrate(
+            suite, scenes=scenes, views=views, seed=seed, workers=workers, progress=progress_printer(show),
+            every_fruit=args.every_fruit, drawn=drawn,
+        )  # fmt: skip
     neighbours = (
         f"its neighbours (the every-fruit detector): {report['every_fruit_detections']} measured, "
         f"{report['every_fruit_refused']} refused; "
