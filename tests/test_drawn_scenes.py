@@ -97,3 +97,21 @@ def test_calibrate_adds_one_scene_of_each_drawn_configuration(tmp_path, capsys):
     by_scenario = collections.Counter(r["scenario"] for r in doc["rows"])
     assert by_scenario == {"clean": 9, "drawn_5_0": 9, "drawn_5_1": 9}
     assert "2 drawn scenes" in load_noise_model(str(out)).source
+
+
+def test_episodes_in_drawn_configurations_end_with_an_outcome_and_claim_only_what_holds(tmp_path):
+    """Four configurations nobody chose (draw seed 2026), one closed-loop episode each: each
+    ends with an outcome, and one that claims the fruit localised is within 5 mm and holds
+    the truth inside its 99.9% ellipsoid."""
+    from bve_mj.config import with_overrides
+    from bve_mj.loop.mujoco import run_mujoco_episode
+    from bve_mj.loop.outcomes import Outcome
+
+    write_drawn_scenes(tmp_path, 4, 2026)
+    for sc in load_suite(tmp_path):
+        settings = with_overrides(sc.settings(), episode={"views": 8})
+        ep = run_mujoco_episode(settings, 1)
+        assert isinstance(ep.result.outcome, Outcome), sc.name
+        if ep.result.outcome in ("converged", "stable"):
+            assert ep.final_error_mm < 5.0, (sc.name, ep.final_error_mm)
+            assert ep.result.final.mahalanobis_sq(ep.truth) < 16.27, sc.name
