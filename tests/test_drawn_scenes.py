@@ -7,10 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from bve_mj.campaigns.drawn_scenes import FRUIT_PER_TRUSS, draw_scene, scene_toml, write_drawn_scenes
+from bve_mj.campaigns.drawn_scenes import draw_scene, scene_toml, write_drawn_scenes
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.cli import main
 from bve_mj.config import settings_from_dict
+from bve_mj.config.scene import FRUIT_TYPE_PER_TRUSS
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.noise import load_noise_model
 
@@ -23,7 +24,7 @@ def test_every_draw_is_a_valid_scenario_and_the_space_is_spread():
         settings = settings_from_dict(sections)
         assert scene_toml(description, sections).startswith(f"# {description}\n[scene]\n")
         sc = settings.scene
-        lo, hi = FRUIT_PER_TRUSS[sc.fruit_type]
+        lo, hi = FRUIT_TYPE_PER_TRUSS[sc.fruit_type]
         assert lo <= sc.fruit_per_truss <= hi and 0 <= sc.target_index < sc.fruit_per_truss
         if sc.ripeness:
             assert sc.ripeness[sc.target_index] == "red"
@@ -31,7 +32,7 @@ def test_every_draw_is_a_valid_scenario_and_the_space_is_spread():
         seen["headlight"] += sc.headlight
         seen["sensor"] += "sensor" in sections
         seen["given ripeness"] += bool(sc.ripeness)
-    for name in (*FRUIT_PER_TRUSS, "chain", "cluster"):
+    for name in (*FRUIT_TYPE_PER_TRUSS, "chain", "cluster"):
         assert seen[name] >= 40, (name, seen[name])
     assert 50 <= seen["headlight"] <= 110  # 20% of 400
     assert 80 <= seen["sensor"] <= 160  # 30%

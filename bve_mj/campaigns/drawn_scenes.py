@@ -12,8 +12,8 @@ the ranges from ``docs/greenhouse.md`` where it gives them):
 
 =========================  ===============================================================
 fruit type                 cherry, cocktail, round, beefsteak or plum, equally likely
-fruit per truss            the type's range: cherry 12-25, cocktail 8-14, round 4-8,
-                           beefsteak 2-5, plum 4-8 (uniform)
+fruit per truss            the type's range (``FRUIT_TYPE_PER_TRUSS``): cherry 12-25,
+                           cocktail 8-14, round 4-8, beefsteak 2-5, plum 4-8 (uniform)
 target                     any fruit of its truss (uniform), red
 truss layout               chain or cluster, equally likely
 trusses, plants            1-4, 1-6
@@ -46,20 +46,13 @@ from typing import Any, get_args
 import numpy as np
 
 from bve_mj.config.fields import FruitType, RipenessName
+from bve_mj.config.scene import FRUIT_TYPE_PER_TRUSS
 from bve_mj.errors import ConfigError
 
-__all__ = ["FRUIT_PER_TRUSS", "draw_scene", "scene_toml", "write_drawn_scenes"]
+__all__ = ["MAX_DRAWN", "draw_scene", "scene_toml", "write_drawn_scenes"]
 
-FRUIT_PER_TRUSS: dict[str, tuple[int, int]] = {
-    "cherry": (12, 25),
-    "cocktail": (8, 14),
-    "round": (4, 8),
-    "beefsteak": (2, 5),
-    "plum": (4, 8),
-}
-"""Fruit per truss of each type, inclusive (``docs/greenhouse.md``; beefsteak: 2-5)."""
-
-MAX_COUNT = 10_000
+MAX_DRAWN = 10_000
+"""The most configurations one call writes."""
 
 
 def _window(rng: np.random.Generator, low: float, high: float, width: float, digits: int = 3) -> list[float]:
@@ -72,7 +65,7 @@ def draw_scene(rng: np.random.Generator) -> tuple[str, dict[str, dict[str, Any]]
     """One configuration from the scene space (module docstring): a one-line description
     and the settings' sections (``scene``, and ``sensor`` when drawn)."""
     fruit_type = str(rng.choice(get_args(FruitType)))
-    k = int(rng.integers(FRUIT_PER_TRUSS[fruit_type][0], FRUIT_PER_TRUSS[fruit_type][1] + 1))
+    k = int(rng.integers(FRUIT_TYPE_PER_TRUSS[fruit_type][0], FRUIT_TYPE_PER_TRUSS[fruit_type][1] + 1))
     target = int(rng.integers(k))
     layout = str(rng.choice(["chain", "cluster"]))
     scene: dict[str, Any] = {
@@ -160,7 +153,7 @@ def write_drawn_scenes(out: str | Path, count: int, seed: int) -> list[Path]:
     from bve_mj.config import settings_from_dict
     from bve_mj.config.settings import tomllib
 
-    for name, value, lo, hi in (("count", count, 1, MAX_COUNT), ("seed", seed, 0, 2**63 - 1)):
+    for name, value, lo, hi in (("count", count, 1, MAX_DRAWN), ("seed", seed, 0, 2**63 - 1)):
         if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
             raise ConfigError(name, value, f"an integer in [{lo}, {hi}]")
     folder = Path(out)

@@ -23,7 +23,13 @@ from bve_mj.config.fields import (
 )
 from bve_mj.errors import ConfigError
 
-__all__ = ["FRUIT_TYPE_DIAMETER_M", "FRUIT_TYPE_SHAPE_INDEX", "SceneConfig", "SensorConfig"]
+__all__ = [
+    "FRUIT_TYPE_DIAMETER_M",
+    "FRUIT_TYPE_PER_TRUSS",
+    "FRUIT_TYPE_SHAPE_INDEX",
+    "SceneConfig",
+    "SensorConfig",
+]
 
 FRUIT_TYPE_DIAMETER_M: dict[str, tuple[float, float]] = {
     "cherry": (0.015, 0.030),
@@ -45,6 +51,17 @@ FRUIT_TYPE_SHAPE_INDEX: dict[str, tuple[float, float]] = {
 }
 
 """Shape index (height / width) range of each fruit type (docs/greenhouse.md)."""
+
+FRUIT_TYPE_PER_TRUSS: dict[str, tuple[int, int]] = {
+    "cherry": (12, 25),
+    "cocktail": (8, 14),
+    "round": (4, 8),
+    "beefsteak": (2, 5),
+    "plum": (4, 8),
+}
+
+"""Fruit per truss of each type, inclusive (docs/greenhouse.md; beefsteak, which it does not
+give: 2-5): the range configurations are drawn in (:mod:`bve_mj.campaigns.drawn_scenes`)."""
 
 
 @dataclass(frozen=True, kw_only=True)
