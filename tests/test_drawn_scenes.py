@@ -58,6 +58,9 @@ def test_nothing_is_overwritten_and_nothing_written_when_refused(tmp_path):
         write_drawn_scenes(folder, 4, 3)
     assert sorted(p.name for p in folder.iterdir()) == ["drawn_3_1.toml"]
     assert (folder / "drawn_3_1.toml").read_text() == "mine"
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ConfigError, match="can write"):
+        write_drawn_scenes(tmp_path / "file" / "under", 2, 3)  # a file in the way: not a folder
     with pytest.raises(ConfigError, match="count"):
         write_drawn_scenes(folder, 0, 3)
     with pytest.raises(ConfigError, match="seed"):

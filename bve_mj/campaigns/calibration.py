@@ -291,7 +291,6 @@ class CalibrationData:
     views: int
     seed: int
     wall_s: float
-    drawn: int = 0
 
     @property
     def detections(self) -> list[dict[str, Any]]:
@@ -338,9 +337,8 @@ def run_calibration(
             progress(done, len(tasks))
     rows.sort(key=lambda r: (r["scenario"], r["scene_seed"], r["view"]))
     return CalibrationData(
-        tuple(rows), tuple(sc.name for sc in scenarios), scenes, views, seed, time.perf_counter() - t0,
-        len(drawn),
-    )  # fmt: skip
+        tuple(rows), tuple(sc.name for sc in scenarios), scenes, views, seed, time.perf_counter() - t0
+    )
 
 
 def calibrate(

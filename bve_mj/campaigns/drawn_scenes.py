@@ -171,7 +171,10 @@ def write_drawn_scenes(out: str | Path, count: int, seed: int) -> list[Path]:
         text = scene_toml(f"Drawn scene {i} of seed {seed}: {description}", sections)
         settings_from_dict(tomllib.loads(text))  # each draw is a valid scenario, read as written
         texts.append(text)
-    folder.mkdir(parents=True, exist_ok=True)
-    for path, text in zip(paths, texts, strict=True):
-        write_text_atomic(path, text)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for path, text in zip(paths, texts, strict=True):
+            write_text_atomic(path, text)
+    except OSError as exc:
+        raise ConfigError("out", str(out), f"a folder this user can write ({exc.strerror})") from None
     return paths
