@@ -422,6 +422,27 @@ def test_a_fruit_behind_a_nearer_one_is_predicted_hidden_and_visible_from_the_si
     assert np.all(arcs == 0.0)
 
 
+def test_with_rims_only_a_nearer_fruit_hides_an_outline():
+    """Two touching fruit seen obliquely overlap in the image. Without rims the shared stretch
+    is nobody's outline; with rims (the detector's interior edges) the nearer fruit keeps its
+    whole outline and only the farther one loses the stretch behind it."""
+    near, far = np.array([0.40, 0.0, 0.3]), np.array([0.44, 0.045, 0.3])  # 6 cm apart: touching
+    centres, radii = np.array([near, far]), np.array([0.03, 0.03])
+    p = np.array([0.1, 0.0, 0.3])
+    R = camera_rotation(p, (near + far) / 2)
+    plain = visible_arc_deg(centres, radii, p, R, F, W, H)
+    rims = visible_arc_deg(centres, radii, p, R, F, W, H, rims=True)
+    assert plain[0] < 300.0 and plain[1] < 300.0  # the overlap takes both outlines
+    assert rims[0] == pytest.approx(360.0)
+    assert rims[1] == pytest.approx(plain[1])
+    # swap which is nearer: the answer follows the depth, not the order
+    p_back = np.array([0.74, 0.045, 0.3])
+    rims = visible_arc_deg(
+        centres, radii, p_back, camera_rotation(p_back, (near + far) / 2), F, W, H, rims=True
+    )
+    assert rims[1] == pytest.approx(360.0) and rims[0] < 300.0
+
+
 def test_the_tracker_does_not_count_a_hidden_fruit_as_missed():
     front, back = np.array([0.40, 0.0, 0.3]), np.array([0.47, 0.0, 0.3])
     cfg = TrackingConfig(fruits="all", zone_m=0.2, delete_misses=1)

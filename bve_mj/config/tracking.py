@@ -109,6 +109,15 @@ class TrackingConfig:
             "one with the most joint information (sum over tracks) is taken"
         ),
     )
+    unhide: bool = field(
+        default=True,
+        metadata=_why(
+            "where a fruit's BVE view would not show its outline (behind its neighbours, as the "
+            "tracks predict it), plan instead a view from which it would, within the step and "
+            "the task's constraints, reached by the arm's IK (the most outline first; where none "
+            "within a step shows it, a step towards the side that does)"
+        ),
+    )
 
     def __post_init__(self) -> None:
         _choice("tracking", "fruits", self.fruits, FruitsMode)
@@ -119,6 +128,8 @@ class TrackingConfig:
         _positive_int("tracking", "confirm_hits", self.confirm_hits, 100)
         _positive_int("tracking", "delete_misses", self.delete_misses, 100)
         _positive_int("tracking", "candidates", self.candidates, 32)
+        if not isinstance(self.unhide, bool):
+            raise ConfigError("tracking.unhide", self.unhide, "true or false")
         if not 0.0 <= _number("tracking", "zone_framed_share", self.zone_framed_share) <= 1.0:
             raise ConfigError("tracking.zone_framed_share", self.zone_framed_share, "a number in [0, 1]")
         if not 0.0 <= _number("tracking", "explore_span_deg", self.explore_span_deg) <= 180.0:

@@ -28,7 +28,7 @@ from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.tracks import Tracker
 from bve_mj.estimation.unmeasured import in_zone, tracking_config
 from bve_mj.estimation.view_correlation import new_view_share
-from bve_mj.estimation.visibility import visible_arc_deg
+from bve_mj.estimation.visibility import outline_shown_deg, visible_arc_deg
 from bve_mj.loop.arm_clearance import (
     PATH_CLEARANCE_M,
     BaselineClearance,
@@ -42,6 +42,7 @@ from bve_mj.loop.harvest import HarvestResult, RecordsHarvest, harvest
 from bve_mj.loop.mujoco import INNOVATION_PRIOR_DOF, episode_constraints, episode_settings
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.loop.start import calibration_sigmas, start_episode
+from bve_mj.loop.unhiding import ArmUnhider
 from bve_mj.planning.every_fruit import (
     EveryFruitPlanner,
     FruitTarget,
@@ -297,11 +298,19 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     min_arc = s.detector.min_arc_deg
     corr = (noise.centre_correlation, noise.radius_correlation)
 
+    rims = s.detector.interior_edge > 0.0
+
+    def shown(i: int, centres: np.ndarray, radii: np.ndarray, positions: np.ndarray) -> np.ndarray:
+        return outline_shown_deg(i, centres, radii, positions, f, cam.width_px, cam.height_px, rims=rims)
+
     def visible_from(centres: np.ndarray, radii: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
-        return visible_arc_deg(centres, radii, p, R, f, cam.width_px, cam.height_px) >= min_arc
+        return visible_arc_deg(centres, radii, p, R, f, cam.width_px, cam.height_px, rims=rims) >= min_arc
 
     def visible(centres: np.ndarray, radii: np.ndarray, model: BearingSizeModel) -> np.ndarray:
-        return visible_from(centres, radii, model.p_world_camera, model.R_world_camera)
+        # the tracker counts a miss only where any overlap leaves the outline (a rim is often
+        # refused: in truss_cluster most views of a fruit with 150 deg unhidden miss it)
+        p, R = model.p_world_camera, model.R_world_camera
+        return visible_arc_deg(centres, radii, p, R, f, cam.width_px, cam.height_px) >= min_arc
 
     def gain(fruit: FruitTarget, p: np.ndarray, R: np.ndarray) -> float:
         x = fruit.belief.mean
@@ -351,7 +360,13 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
 
     planner: PlansForEveryFruit
     if s.planner.kind == "bve":
-        planner = EveryFruitPlanner(make, gain, visible_from, s.tracking.candidates, clear)
+        upright = s.planner.upright > 0.0
+        unhide = (
+            ArmUnhider(search, names, kin, shown, min_arc, planner_rng, upright, q0)
+            if s.tracking.unhide
+            else None
+        )
+        planner = EveryFruitPlanner(make, gain, visible_from, s.tracking.candidates, clear, unhide)
     else:  # a baseline: one pattern for the whole zone, under the same clearance check
         check = BaselineClearance(world, known, s.planner.upright > 0.0)
         q = world.q_measured if world.q_measured is not None else q0

@@ -16,6 +16,10 @@ candidate is left to later views. Why not optimise J itself: each fruit's BVE pr
 smooth and the arm's joint-space solver handles one look-at target; J over a truss is a sum
 of terms switched on and off by occlusion, which a local optimiser cannot follow.
 
+Where a candidate's BVE view would not see the fruit it was planned for (behind its
+neighbours, as the tracks predict), ``unhide`` may offer a view from which it would
+(:mod:`bve_mj.planning.unhide`); it stands in for that BVE view and is scored the same way.
+
 The baselines (:class:`PatternPlanner`: random, circle, three fixed views) plan without the
 tracks' information: one single-target baseline planner, under the same constraints and the
 arm's reachability, aimed at the centre of the fruit found so far (the work zone's centre
@@ -78,6 +82,9 @@ class CandidateScore:
     score: float
     sees: tuple[int, ...]
     status: str
+    kind: str = "bve"
+    """``bve``: the fruit's BVE view; ``unhide``: a view where the tracks predict the fruit's
+    outline shows, taken instead of a BVE view that would not see it (``unhide`` above)."""
 
 
 def information_gain(belief: Belief, H: np.ndarray, noise_cov: np.ndarray) -> float:
@@ -135,6 +142,11 @@ class EveryFruitPlanner:
             the robot knows (the world's check, :func:`bve_mj.loop.arm_clearance.path_clearance`);
             a candidate whose move is not clear is left out as one whose planner failed, an
             exploring view likewise. None: not checked.
+        unhide: ``unhide(fruit, fruits, p_world_camera, q)``: a view from which ``fruit`` would
+            show its outline (:func:`bve_mj.planning.unhide.unhiding_positions`, reached by
+            the arm), or None. Where a candidate's BVE view would not see the fruit it was
+            planned for (or its planner failed), this view stands in for it, scored the same
+            way. None: the BVE's views only.
     """
 
     make: Callable[[], Planner]
@@ -142,6 +154,9 @@ class EveryFruitPlanner:
     visible: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
     candidates: int = 2
     clear: Callable[[ViewPlan], bool] | None = None
+    unhide: (
+        Callable[[FruitTarget, Sequence[FruitTarget], np.ndarray, np.ndarray | None], ViewPlan | None] | None
+    ) = None
     _planners: dict[int, Planner] = field(default_factory=dict)
     last_scores: tuple[CandidateScore, ...] = ()
 
@@ -198,6 +213,35 @@ class EveryFruitPlanner:
         if isinstance(p, LearnsFromFailedViews):
             p.note_failed_view(p_world_camera, p_world_target)
 
+    def _bve_plan(
+        self,
+        target: FruitTarget,
+        p_world_camera: np.ndarray,
+        iteration: int,
+        q: np.ndarray | None,
+        failures: list[str],
+    ) -> ViewPlan | None:
+        """The BVE's view for ``target``, or None (the reason appended to ``failures``)."""
+        planner = self.planner(target.id)
+        if q is not None and isinstance(planner, SyncsToEncoders):
+            planner.set_configuration(q)
+        try:
+            plan = planner.plan(target.belief, p_world_camera, iteration)
+        except (BveError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+            failures.append(f"fruit {target.id}: {type(exc).__name__}: {exc}")
+            return None
+        if not (np.all(np.isfinite(plan.p_world_camera)) and np.all(np.isfinite(plan.p_world_target))):
+            failures.append(f"fruit {target.id}: non-finite viewpoint")
+            return None
+        if self.clear is not None and not self.clear(plan):
+            failures.append(f"fruit {target.id}: the move passes through a known fruit or the canopy")
+            return None
+        return plan
+
+    def _sees(self, plan: ViewPlan, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+        R = camera_rotation(plan.p_world_camera, plan.p_world_target)
+        return np.asarray(self.visible(centres, radii, plan.p_world_camera, R), dtype=bool)
+
     def plan(
         self,
         fruits: Sequence[FruitTarget],
@@ -223,22 +267,18 @@ class EveryFruitPlanner:
         scores: list[CandidateScore] = []
         failures: list[str] = []
         for target in chosen:
-            planner = self.planner(target.id)
-            if q is not None and isinstance(planner, SyncsToEncoders):
-                planner.set_configuration(q)
-            try:
-                plan = planner.plan(target.belief, p_world_camera, iteration)
-            except (BveError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
-                failures.append(f"fruit {target.id}: {type(exc).__name__}: {exc}")
-                continue
-            if not (np.all(np.isfinite(plan.p_world_camera)) and np.all(np.isfinite(plan.p_world_target))):
-                failures.append(f"fruit {target.id}: non-finite viewpoint")
-                continue
-            if self.clear is not None and not self.clear(plan):
-                failures.append(f"fruit {target.id}: the move passes through a known fruit or the canopy")
+            plan = self._bve_plan(target, p_world_camera, iteration, q, failures)
+            sees = None if plan is None else self._sees(plan, centres, radii)
+            kind = "bve"
+            if self.unhide is not None and (
+                sees is None or not sees[[f.id for f in fruits].index(target.id)]
+            ):
+                shown = self.unhide(target, fruits, p_world_camera, q)
+                if shown is not None and (self.clear is None or self.clear(shown)):
+                    plan, sees, kind = shown, self._sees(shown, centres, radii), "unhide"
+            if plan is None or sees is None:
                 continue
             R = camera_rotation(plan.p_world_camera, plan.p_world_target)
-            sees = np.asarray(self.visible(centres, radii, plan.p_world_camera, R), dtype=bool)
             score = sum(
                 self.gain(f, plan.p_world_camera, R)
                 for f, s in zip(fruits, sees, strict=True)
@@ -252,6 +292,7 @@ class EveryFruitPlanner:
                     float(score),
                     tuple(f.id for f, s in zip(fruits, sees, strict=True) if s),
                     plan.status,
+                    kind,
                 )
             )
             if best is None or score > best[0]:
