@@ -2,19 +2,19 @@
 
 The BVE plans a fruit's next view from its covariance alone: the view that shrinks it most.
 In a compact truss that view is often one from which the fruit is behind its neighbours (a
-fruit at the back of a cluster seen from the aisle shows 100-150° of outline, and the detector
+fruit at the back of a cluster seen from the aisle shows 100-185° of outline, and the detector
 wants ``detector.min_arc_deg``), and it is refused view after view while the fruit's belief,
-started from one lucky view, never tightens (``truss_cluster``: the fruit at the back were
-measured in 1-6 of 30 random reachable views, from the side or above, and in none of the
-episode's, all from the front).
+started from one lucky view, never tightens (``truss_cluster`` 3669142227: every view the BVE
+chose came from the aisle side; from the side or above the two fruit at the back show
+215-360°).
 
 :func:`unhiding_positions` ranks camera positions for such a fruit by the outline the tracks
 predict it shows there (:func:`~bve_mj.estimation.visibility.outline_shown_deg`): positions
 within one step of the camera that satisfy the task constraints around the fruit's estimate,
 drawn at random in the step's ball. Where some show ``min_arc_deg`` or more they come first,
 the most outline first; where none does (the side that shows the fruit is more than a step
-away), the positions nearest the best place on the distance band come first, so the camera
-walks there in steps. The caller reaches them with the arm (IK) and checks the move.
+away), the positions nearest the nearest place on the distance band that shows it come
+first, so the camera walks there in steps. The caller reaches them with the arm (IK) and checks the move.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bve_mj.planning.constraints import Constraint
+from bve_mj.planning.constraints import Constraint, max_violation
 
 __all__ = ["ShownFn", "UnhideOptions", "unhiding_positions"]
 
@@ -48,10 +48,6 @@ class UnhideOptions:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"UnhideOptions.{name} must be a positive integer, got {value!r}")
-
-
-def _holds(constraints: Sequence[Constraint], x: np.ndarray, tol: float) -> bool:
-    return all(g.value(x) <= tol for g in constraints)
 
 
 def unhiding_positions(
@@ -94,7 +90,7 @@ def unhiding_positions(
     ball = [
         x
         for x in c_now + d * (step_m * rng.random((opt.samples, 1)) ** (1.0 / 3.0))
-        if _holds(constraints, x, tol)
+        if max_violation(constraints, x) <= tol
     ]
     if not ball:
         return []
@@ -104,7 +100,7 @@ def unhiding_positions(
         return showing[: opt.keep]
     e = rng.standard_normal((opt.band_samples, 3))
     e /= np.linalg.norm(e, axis=1, keepdims=True)
-    band = [x for x in k + band_distance_m * e if _holds(constraints, x, tol)]
+    band = [x for x in k + band_distance_m * e if max_violation(constraints, x) <= tol]
     rest = [c for c in near if c[1] < min_arc_deg]
     if band:
         arcs = outline(band)
