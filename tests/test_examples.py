@@ -34,6 +34,7 @@ def _args(name: str, out: Path) -> list[str]:
         "render_scene.py": ["4", str(out)],
         "rims_figure.py": ["4", str(out)],
         "sample_paths.py": [str(out)],
+        "unhide_figure.py": ["3669142227", str(out)],
     }[name]
 
 
@@ -48,6 +49,7 @@ def test_every_example_is_listed():
         "render_scene.py",
         "rims_figure.py",
         "sample_paths.py",
+        "unhide_figure.py",
     ]
 
 
@@ -69,6 +71,7 @@ def test_examples_leave_the_checkout_clean(tmp_path):
     assert (tmp_path / "render_scene" / "greenhouse.png").is_file()
     assert (tmp_path / "rims_figure" / "rims.png").is_file()
     assert (tmp_path / "sample_paths" / "sample_paths.png").is_file()
+    assert (tmp_path / "unhide_figure" / "unhide.png").is_file()
     assert (tmp_path / "campaign" / "campaign" / "summary.json").is_file()
     # the examples' default output folder, out/, is ignored by git wherever it is made
     for path in ("out/x.png", "examples/out/x"):
