@@ -209,3 +209,20 @@ def test_the_outline_of_many_cameras_at_once_is_the_outline_of_each():
     np.testing.assert_array_equal(inside, [0.0, 0.0])
     with pytest.raises(ValueError, match="out of range"):
         outline_shown_deg(2, CENTRES, RADII, np.array([FRONT]), F, W, H)
+
+
+def test_the_loop_says_which_views_were_taken_to_show_a_hidden_fruit():
+    """The every-fruit loop's event ``unhiding`` for a view whose chosen candidate was an
+    unhiding view, none for a BVE view or a planner that keeps no scores."""
+    from bve_mj.loop.every_fruit import _unhiding
+    from bve_mj.planning.every_fruit import CandidateScore
+
+    class Scored:
+        last_scores = (
+            CandidateScore(1, 2.0, (1,), "optimal", "unhide"),
+            CandidateScore(0, 1.0, (0,), "optimal"),
+        )
+
+    assert [str(e) for e in _unhiding(Scored(), 1)] == ["unhiding: fruit 1"]
+    assert _unhiding(Scored(), 0) == []
+    assert _unhiding(object(), 1) == []  # type: ignore[arg-type]

@@ -21,6 +21,7 @@ EventKind = Literal[
     "seen_in_part_settled",  # --fruits all: a fruit seen in part proved a measured track's: forgotten
     "zone_unframed",  # --fruits all: a view aimed at a part of the zone not yet framed framed none of it
     "retreated",  # --fruits all: the planner found no view, and the camera drew back towards the aisle
+    "unhiding",  # --fruits all: the fruit's BVE view would not show it; this view, which should, was taken
     "stall_escaped",  # the camera had stalled: the planner was told that view is spent, and planned this one
     "outside_prior_bound",  # the fruit localised lies outside the prior's declared bound: not the target
 ]

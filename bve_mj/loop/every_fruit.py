@@ -37,7 +37,7 @@ from bve_mj.loop.claims import Claims
 from bve_mj.loop.events import Event
 from bve_mj.loop.fruit_records import FruitsResult, FruitState, FruitsView
 from bve_mj.loop.outcomes import Outcome
-from bve_mj.planning.every_fruit import EXPLORE, FruitTarget, PlansForEveryFruit
+from bve_mj.planning.every_fruit import EXPLORE, FruitTarget, PlansForEveryFruit, ReportsCandidates
 from bve_mj.planning.plan import ViewPlan
 from bve_mj.planning.zone_coverage import ZoneCoverage
 from bve_mj.sim.world import ReportsUnmeasured, SeesEveryFruit
@@ -224,6 +224,7 @@ def run_every_fruit(
             t_plan = time.perf_counter()
             try:
                 plan, target = planner.plan(targets, world.p_world_camera, i, world.q_measured)
+                events += _unhiding(planner, target)
             except (BveError, ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
                 worst = max(targets, key=lambda f: f.sigma_max_m)
                 events.append(Event("planner_failed", f"{type(exc).__name__}: {exc}"))
@@ -242,6 +243,14 @@ def run_every_fruit(
     elif outcome == Outcome.CONVERGED and (tracker.dropped or views[-1].unmeasured):
         outcome = Outcome.INCOMPLETE
     return FruitsResult(tuple(views), time.perf_counter() - t0, outcome)
+
+
+def _unhiding(planner: PlansForEveryFruit, target: int) -> list[Event]:
+    """The event of a view taken to show fruit ``target`` where its BVE view would not."""
+    if not isinstance(planner, ReportsCandidates):
+        return []
+    kinds = {c.kind for c in planner.last_scores if c.planned_for == target}
+    return [Event("unhiding", f"fruit {target}")] if "unhide" in kinds else []
 
 
 def seen_in_part_key(h_id: int) -> int:

@@ -53,6 +53,7 @@ __all__ = [
     "FruitTarget",
     "PatternPlanner",
     "PlansForEveryFruit",
+    "ReportsCandidates",
     "information_gain",
 ]
 
@@ -96,6 +97,13 @@ def information_gain(belief: Belief, H: np.ndarray, noise_cov: np.ndarray) -> fl
     before = np.linalg.slogdet(P[:3, :3])[1]
     after = np.linalg.slogdet(post[:3, :3])[1]
     return float(before - after)
+
+
+@runtime_checkable
+class ReportsCandidates(Protocol):
+    """A planner that keeps the scores of the candidates its last plan weighed."""
+
+    last_scores: tuple[CandidateScore, ...]
 
 
 @runtime_checkable
