@@ -83,6 +83,12 @@ def test_no_position_satisfies_the_constraints_gives_none_and_bad_input_is_refus
     assert unhiding_positions(1, CENTRES, RADII, camera, impossible, 0.1, 2.0, _outline, MIN_ARC, rng) == []
     with pytest.raises(ValueError, match="out of range"):
         unhiding_positions(2, CENTRES, RADII, camera, [], 0.1, 0.3, _outline, MIN_ARC, rng)
+    with pytest.raises(ValueError, match="step_m"):
+        unhiding_positions(1, CENTRES, RADII, camera, [], -0.1, 0.3, _outline, MIN_ARC, rng)
+    with pytest.raises(ValueError, match="band_distance_m"):
+        unhiding_positions(1, CENTRES, RADII, camera, [], 0.1, math.nan, _outline, MIN_ARC, rng)
+    with pytest.raises(ValueError, match="min_arc_deg"):
+        unhiding_positions(1, CENTRES, RADII, camera, [], 0.1, 0.3, _outline, 0.0, rng)
     with pytest.raises(ValueError, match="samples"):
         UnhideOptions(samples=0)
     with pytest.raises(ValueError, match="keep"):

@@ -19,6 +19,7 @@ first, so the camera walks there in steps. The caller reaches them with the arm 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -77,6 +78,11 @@ def unhiding_positions(
     radii = np.asarray(radii_m, dtype=float).reshape(-1)
     if not 0 <= index < len(centres) or radii.shape[0] != centres.shape[0]:
         raise ValueError(f"fruit index {index} out of range for {len(centres)} fruit")
+    for name, value in (("step_m", step_m), ("band_distance_m", band_distance_m)):
+        if not (math.isfinite(value) and value > 0.0):
+            raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    if not 0.0 < min_arc_deg <= 360.0:
+        raise ValueError(f"min_arc_deg must be in (0, 360], got {min_arc_deg!r}")
     c_now = np.asarray(p_world_camera, dtype=float)
     k = centres[index]
 
