@@ -134,5 +134,7 @@ def main(seed: int = 3669142227, out_dir: str = "out") -> None:
 if __name__ == "__main__":
     args = sys.argv[1:]
     if len(args) > 2 or (args and not args[0].isdigit()):
-        raise SystemExit("usage: python examples/unhide_figure.py [EPISODE_SEED] [OUT_DIR]")
+        allowed = "[EPISODE_SEED (an integer >= 0)] [OUT_DIR]"
+        print(f"unhide_figure.py: error: arguments: got {args}; allowed: {allowed}", file=sys.stderr)
+        sys.exit(2)
     main(int(args[0]) if args else 3669142227, args[1] if len(args) > 1 else "out")
