@@ -2,7 +2,8 @@
 detector measures them from any view the arm can take at all.
 
     python benchmarks/bench_coverage_oracle.py [--scenario truss_cluster[,ripe_truss,...]]
-                                               [--episodes 5] [--seed 3141] [--views 30] [--quiet]
+                                               [--episodes 5] [--seed 3141] [--views 30]
+                                               [--picked] [--quiet]
 
 For each episode (seeded as the suite seeds it): the every-fruit episode itself (which ripe
 fruit of the work zone it localised within 5 mm), then, in the same scene, ``--views``
@@ -16,6 +17,10 @@ in view), and why the views that found but refused it did so.
 
 A fruit the episode missed but these views measure in two or more is the planner's (or the
 tracker's) miss; one no view measures, though mostly in view in many, is the detector's.
+
+``--picked``: the views are taken with the fruit the episode localised taken off the plant
+(:class:`bve_mj.sim.basket.Basket`, as ``tracking.pick_rounds`` has the harvest do): what a
+survey after the harvest could measure of the fruit they hid.
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ from bve_mj.perception.all_fruit import detect_all
 from bve_mj.perception.detection import Intrinsics
 from bve_mj.robot import IkOptions, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
+from bve_mj.sim.basket import Basket
 from bve_mj.sim.mujoco_world import declared_noise
 from bve_mj.sim.render import OffscreenRenderer
 from bve_mj.sim.scene_model import fruit_geom_name
@@ -65,8 +71,9 @@ def _reason(text: str) -> str:
     return re.sub(r"\d+(\.\d+)?", "N", text.split(":")[0])[:48]
 
 
-def oracle_episode(settings: Settings, seed: int, views: int) -> list[FruitSeen]:
-    """The episode's localised ripe fruit and what ``views`` sampled views make of them."""
+def oracle_episode(settings: Settings, seed: int, views: int, picked: bool = False) -> list[FruitSeen]:
+    """The episode's localised ripe fruit and what ``views`` sampled views make of them
+    (``picked``: with the fruit it localised taken off the plant)."""
     ep = run_every_fruit_episode(settings, seed)
     matches, _, _ = ep.matches()
     localised = {m.fruit.name: m.localised_within(5.0) for m in matches}
@@ -87,6 +94,11 @@ def oracle_episode(settings: Settings, seed: int, views: int) -> list[FruitSeen]
     rng = np.random.default_rng(seed)
     q = start.q_start
     taken = attempts = 0
+    basket = Basket(model, start.info)
+    if picked:
+        for fr in ripe:
+            if localised.get(fr.name, False):
+                basket.take(fr.name)
     try:
         while taken < views and attempts < 8 * views:
             attempts += 1
@@ -125,6 +137,7 @@ def oracle_episode(settings: Settings, seed: int, views: int) -> list[FruitSeen]
                 if m is not None and m.fruit_index not in measured:
                     seen[m.fruit_index].refusals[_reason(ref.reason)] += 1
     finally:
+        basket.put_back()  # the compiled scene is shared by the process's episodes
         renderer.close()
     return seen
 
@@ -135,6 +148,7 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=5)
     ap.add_argument("--seed", type=int, default=3141)
     ap.add_argument("--views", type=int, default=30, help="sampled views per scene")
+    ap.add_argument("--picked", action="store_true", help="views with the fruit the episode localised picked")
     ap.add_argument("--quiet", action="store_true", help="only the summary per scenario")
     args = ap.parse_args()
     if args.episodes < 1:
@@ -152,7 +166,7 @@ def main() -> None:
             settings = with_overrides(base, tracking={"fruits": "all"})
             every: list[FruitSeen] = []
             for run in range(args.episodes):
-                seen = oracle_episode(settings, episode_seed(args.seed, run), args.views)
+                seen = oracle_episode(settings, episode_seed(args.seed, run), args.views, args.picked)
                 every += seen
                 if not args.quiet:
                     row = " ".join(
@@ -165,7 +179,8 @@ def main() -> None:
             n = max(len(every), 1)
             found = sum(s.localised for s in every)
             lines.append(
-                f"{sc.name}: {len(every)} ripe fruit, localised by the episode {found} "
+                f"{sc.name}{' (the localised picked)' if args.picked else ''}: {len(every)} ripe fruit, "
+                f"localised by the episode {found} "
                 f"({100 * found / n:.0f}%), measured in >= 2 of {args.views} "
                 f"sampled views {sum(s.measured >= 2 for s in every)} "
                 f"({100 * sum(s.measured >= 2 for s in every) / n:.0f}%); of the {len(missed)} missed: "

@@ -145,6 +145,11 @@ def _cli(*args):
         (["scenarios", "--fruits", "all", "--planners", "bve,orbit"], "planners"),
         (["scenarios", "--fruits", "all", "--planners", "bve,bve"], "planners"),
         (["episode", "--fruits", "all", "--planner", "spiral"], "planner"),
+        (["episode", "--pick", "2"], "pick"),
+        (["episode", "--fruits", "all", "--pick", "11"], "pick"),
+        (["episode", "--fruits", "all", "--pick", "some"], "pick"),
+        (["scenarios", "--pick", "2"], "pick"),
+        (["scenarios", "--fruits", "all", "--pick", "-1"], "pick"),
     ],
 )
 def test_bad_fruits_input_exits_2_with_one_line(args, field):

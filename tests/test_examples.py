@@ -31,6 +31,7 @@ def _args(name: str, out: Path) -> list[str]:
         "campaign.py": [str(out / "campaign"), "1"],  # 1 run per cell (5 by default: 39 s)
         "headless_episode.py": ["2"],
         "paper_table.py": ["3"],  # runs per experiment (20 by default: 50 s)
+        "pick_figure.py": ["9105", str(out)],
         "render_scene.py": ["4", str(out)],
         "rims_figure.py": ["4", str(out)],
         "sample_paths.py": [str(out)],
@@ -46,6 +47,7 @@ def test_every_example_is_listed():
         "gym_policies.py",
         "headless_episode.py",
         "paper_table.py",
+        "pick_figure.py",
         "render_scene.py",
         "rims_figure.py",
         "sample_paths.py",

@@ -17,7 +17,7 @@ from bve_mj.errors import ConfigError
 from bve_mj.robot import arm_kinematics
 from bve_mj.sim import plants
 from bve_mj.sim.scene import build_scene
-from bve_mj.sim.scene_model import RIPENESS, Fruit, SceneInfo, fruit_geom_name
+from bve_mj.sim.scene_model import RIPENESS, Fruit, SceneInfo, fruit_calyx_name, fruit_geom_name
 from bve_mj.sim.textures import RIPENESS_STAGES, cube_directions, fruit_texture, ripeness_stage
 
 REPO = Path(__file__).resolve().parents[1]
@@ -59,7 +59,8 @@ def _views_clear(model: mujoco.MjModel, data: mujoco.MjData, info: SceneInfo) ->
     25° of straight on) to points of its silhouette that no leaf, stem or other truss stops
     (its own truss's neighbours, pedicels and calyces may: touching fruit are normal)."""
     target = info.target
-    own = {fruit_geom_name(f.name) for f in info.fruits if f.truss == 0} | {"truss0", "truss0_calyces"}
+    truss0 = [f.name for f in info.fruits if f.truss == 0]
+    own = {fruit_geom_name(n) for n in truss0} | {fruit_calyx_name(n) for n in truss0} | {"truss0"}
     own_ids = {model.geom(n).id for n in own}
     groups = np.array([1, 1, 0, 1, 1, 1], np.uint8)  # the arm (group 2) is not an occluder
     hit = np.zeros(1, np.int32)

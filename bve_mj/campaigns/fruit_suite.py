@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
-from typing import Any, get_args
+from typing import TYPE_CHECKING, Any, get_args
 
 import numpy as np
 
@@ -27,11 +27,16 @@ from bve_mj.campaigns.spec import episode_seed
 from bve_mj.config import PlannerKind, Settings, with_overrides
 from bve_mj.errors import BveError, ConfigError
 from bve_mj.estimation.belief import Belief
+from bve_mj.sim.scene_model import RIPENESS
+
+if TYPE_CHECKING:
+    from bve_mj.loop.mujoco_fruits import FruitsEpisode
 
 __all__ = [
     "FruitSuiteResult",
     "compare_fruit_planners",
     "format_fruit_suite",
+    "format_harvests",
     "run_fruit_suite",
     "run_fruit_suites",
 ]
@@ -55,11 +60,14 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
             "message": str(exc),
         }
     matches, other, false = ep.matches()
+    visits = () if ep.harvest is None else ep.harvest.visits
+    picked = {v.picked for v in visits if v.picked is not None}
     fruits = []
     for m in matches:
         t = m.track
         fruits.append(
             {
+                "picked": m.fruit.name in picked,
                 "error_mm": m.error_mm if t is not None else None,
                 "nees": m.nees if t is not None else None,
                 "filter_nees": m.filter_nees if t is not None else None,
@@ -81,12 +89,51 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
         "false_tracks": len(false),
         "other_tracks": len(other),
         "seen_in_part": len(ep.result.unmeasured),
+        "harvest": ep.harvest is not None,
+        **_picked_others(ep, picked - {m.fruit.name for m in matches}),
+        "touched": sum(1 for v in visits if v.clearance_m <= 0.0),
         "plan_ms": [1e3 * v.plan_s for v in views[1:]],
         "track_ms": [1e3 * v.track_s for v in views],
         "assign_ms": [1e3 * v.tracking.assign_s for v in views],
         "tracks_max": max((len(v.fruits) for v in views), default=0),
         "wall_s": ep.result.wall_s,
     }
+
+
+def _picked_others(ep: FruitsEpisode, names: set[str]) -> dict[str, int]:
+    """Of the fruit picked that were not the zone's ripe ones: those less ripe than the
+    detector's ripe class, and those ripe but outside the work zone (a neighbouring truss's)."""
+    least = RIPENESS.index(ep.settings.detector.ripe_class or "red")
+    colours = {f.name: ("turning" if f.colour == "orange" else f.colour) for f in ep.info.fruits}
+    unripe = sum(1 for n in names if colours[n] not in RIPENESS or RIPENESS.index(colours[n]) < least)
+    return {"picked_unripe": unripe, "picked_outside": len(names) - unripe}
+
+
+def _harvest_summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The harvests of the episodes that had one (approach mode): the share of the ripe fruit
+    picked, the fruit picked that were not (less ripe, or outside the zone), and the visits
+    in which the arm touched a fruit; empty without a harvest."""
+    rows = [r for r in rows if r.get("harvest")]
+    if not rows:
+        return {}
+    fruits = [f for r in rows for f in r["fruits"]]
+    return {
+        "picked_pct": 100.0 * float(np.mean([f["picked"] for f in fruits])) if fruits else math.nan,
+        "picked_unripe": int(sum(r["picked_unripe"] for r in rows)),
+        "picked_outside": int(sum(r["picked_outside"] for r in rows)),
+        "touched": int(sum(r["touched"] for r in rows)),
+    }
+
+
+def format_harvests(summaries: dict[str, dict[str, Any]]) -> list[str]:
+    """A line per scenario whose episodes harvested: ripe fruit picked, others picked, touches."""
+    return [
+        f"{name}: harvest picked {s['picked_pct']:.1f}% of the zone's ripe fruit; also picked "
+        f"{s['picked_unripe']} less ripe (tracked as ripe) and {s['picked_outside']} ripe outside the zone; "
+        f"{s['touched']} visits touched a fruit"
+        for name, s in summaries.items()
+        if "picked_pct" in s
+    ]
 
 
 def _radius_fields(belief: Belief | None, radius_m: float) -> dict[str, float | None]:
@@ -154,6 +201,7 @@ class FruitSuiteResult:
             "track_ms_median": float(np.median(track)) if track else math.nan,
             "assign_ms_median": float(np.median(assign)) if assign else math.nan,
             "tracks_max": max((r["tracks_max"] for r in ok), default=0),
+            **_harvest_summary(ok),
             "wall_s": float(sum(r.get("wall_s", 0.0) for r in rows)),
             "runs": list(rows),
         }
@@ -189,11 +237,13 @@ def run_fruit_suites(
     seed: int = 0,
     workers: int = 1,
     progress: Callable[[int, int], None] | None = None,
+    pick_rounds: int | None = None,
 ) -> dict[PlannerKind | None, FruitSuiteResult]:
     """:func:`run_fruit_suite` for each of ``planners`` (None: each file's) on the same seeds,
     in one pool: a task runs a few runs of one scenario, every planner on each run in turn,
     so the worker builds each run's scene once (:data:`bve_mj.loop.start.KEPT_SCENES`). Each
-    result's ``wall_s`` is the whole comparison's."""
+    result's ``wall_s`` is the whole comparison's. ``pick_rounds``: approach mode with that
+    many picking rounds (``tracking.pick_rounds``) for every scenario; None: each file's."""
     for name, value, lo in (("seeds", seeds, 1), ("seed", seed, 0), ("workers", workers, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < lo:
             raise ConfigError(name, value, f"an integer >= {lo}")
@@ -210,8 +260,13 @@ def run_fruit_suites(
     def chosen(p: PlannerKind | None) -> dict[str, dict[str, object]]:
         return {} if p is None else {"planner": {"kind": p}}
 
+    tracking: dict[str, object] = {"fruits": "all"}
+    picking: dict[str, dict[str, object]] = {}
+    if pick_rounds is not None:
+        tracking["pick_rounds"] = pick_rounds
+        picking = {"episode": {"approach": True}}
     settings = {
-        name: tuple(with_overrides(s, tracking={"fruits": "all"}, **chosen(p)) for p in planners)
+        name: tuple(with_overrides(s, tracking=tracking, **picking, **chosen(p)) for p in planners)
         for name, s in base.items()
     }
     by_variant = run_rows(partial(run_chunk, _run_one), scenarios, settings, seed, seeds, workers, progress)

@@ -79,6 +79,7 @@ INT_MAXIMA = {
     "steps": 10_000,
     "count": 10_000,
     "drawn": 10_000,
+    "pick": 10,
 }
 """The largest value of each integer option; every other count (runs, seeds, scenes) at most
 ``MAX_RUNS``: a mistyped ``--runs 1000000000000`` is an error, not a run that never ends."""

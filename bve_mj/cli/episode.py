@@ -30,6 +30,9 @@ def episode_cli_settings(args: argparse.Namespace) -> Settings:
     fruits = getattr(args, "fruits", None)
     if fruits is not None and fruits not in get_args(FruitsMode):
         raise ConfigError("fruits", fruits, "one of " + ", ".join(get_args(FruitsMode)))
+    pick = int_arg("pick", getattr(args, "pick", None), 0)
+    if pick is not None and fruits != "all":
+        raise ConfigError("pick", args.pick, "only with --fruits all")
     settings = load_settings(args.config) if args.config else Settings()
     settings = with_overrides(
         settings,
@@ -37,14 +40,14 @@ def episode_cli_settings(args: argparse.Namespace) -> Settings:
             experiment=args.experiment,
             views=int_arg("views", args.views, 1),
             initial_error_m=float_arg("initial-error", args.initial_error, 0.0),
-            approach=True if args.approach else None,
+            approach=True if args.approach or pick else None,
         ),
         planner=given(kind=args.planner, planning_model=args.planning_model),
         measurement=given(kind=args.measurement),
         filter=given(kind=args.filter, state=args.state),
         detector=given(kind=getattr(args, "detector", None)),
         robot=given(name=args.robot),
-        tracking=given(fruits=fruits),
+        tracking=given(fruits=fruits, pick_rounds=pick),
     )
     if args.realistic:
         settings = dataclasses.replace(settings, sensor=SensorConfig.realistic())

@@ -99,10 +99,12 @@ def run_every_fruit_cli(
         for visit in h["visits"]:
             c = visit["clearance_m"]
             clear = f">= {1e3 * c:.0f}" if c >= 0.05 else f"{1e3 * c:.1f}"
+            took = "" if visit.get("picked") is None else f"; picked {visit['picked']}"
             print(
-                f"  track {visit['track']}: {'reached' if visit['reached'] else 'not reached'}, camera "
+                f"  {'round ' + str(visit['round']) + ', ' if visit.get('round') else ''}track "
+                f"{visit['track']}: {'reached' if visit['reached'] else 'not reached'}, camera "
                 f"{1e3 * visit['distance_m']:.0f} mm from its estimate, least clearance of the arm to "
-                f"any fruit {clear} mm" + (f" ({visit['reason']})" if visit["reason"] else "")
+                f"any fruit {clear} mm" + (f" ({visit['reason']})" if visit["reason"] else "") + took
             )
     if video_path is not None and frames == 0:
         print(f"no video written to {video_path}: the episode ended before its first view")

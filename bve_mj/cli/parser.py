@@ -88,6 +88,13 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"{one_of(FruitsMode)}: the target fruit (default), or every ripe fruit of the truss",
     )
     ep.add_argument("--approach", action="store_true", help="approach mode: end close to the fruit")
+    ep.add_argument(
+        "--pick",
+        default=None,
+        metavar="ROUNDS",
+        help="with --fruits all: the harvest picks each fruit it reaches and the survey goes on for the "
+        "fruit the picked ones hid, up to ROUNDS times (0-10; implies --approach; tracking.pick_rounds)",
+    )
     ep.add_argument("--realistic", action="store_true", help="sensor realism on (noise, calibration error)")
     ep.add_argument("--video", default=None, help="write an mp4 of the approach path here")
     ep.add_argument(
@@ -194,6 +201,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help=f"with --fruits all: any of {one_of(PlannerKind, ',', ',')} on the same seeds, compared "
         "with the first (default: each file's planner)",
+    )
+    sc.add_argument(
+        "--pick",
+        default=None,
+        metavar="ROUNDS",
+        help="with --fruits all: approach mode, and the harvest picks each fruit it reaches and surveys "
+        "again for the fruit the picked ones hid, up to ROUNDS times (0-10; default: each file's)",
     )
     sc.add_argument("--dir", default=None, help="a folder of scenario TOML files instead of the suite")
     sc.add_argument("--workers", default=None, help="local processes (default: all cores)")

@@ -42,13 +42,16 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
     suite = load_suite(args.dir, args.only.split(",") if args.only is not None else None)
     if args.planners is not None and args.fruits != "all":
         raise ConfigError("planners", args.planners, "only with --fruits all")
+    pick = int_arg("pick", args.pick, 0)
+    if pick is not None and args.fruits != "all":
+        raise ConfigError("pick", args.pick, "only with --fruits all")
     if args.fruits == "all":
         for name in ("measurement", "filter", "state", "plot"):
             if getattr(args, name) is not None:
                 raise ConfigError(
                     name, getattr(args, name), "not with --fruits all (camera, ekf, centre_radius)"
                 )
-        return _every_fruit(args, suite, seeds, seed, workers or 1, json_path)
+        return _every_fruit(args, suite, seeds, seed, workers or 1, json_path, pick)
     print(
         f"bve-mj scenarios: {len(suite)} scenarios x {seeds} seeds (base seed {seed}), measurement "
         f"{args.measurement or 'from each file'}, filter {args.filter or 'from each file'}, state "
@@ -83,10 +86,22 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def _every_fruit(
-    args: argparse.Namespace, suite: list[Any], seeds: int, seed: int, workers: int, json_path: Path | None
+    args: argparse.Namespace,
+    suite: list[Any],
+    seeds: int,
+    seed: int,
+    workers: int,
+    json_path: Path | None,
+    pick: int | None = None,
 ) -> int:
-    """``bve-mj scenarios --fruits all``: every ripe fruit of each scene."""
-    from bve_mj.campaigns.fruit_suite import compare_fruit_planners, format_fruit_suite, run_fruit_suites
+    """``bve-mj scenarios --fruits all``: every ripe fruit of each scene (``pick``: picking
+    rounds for every scene, approach mode on; None: each file's)."""
+    from bve_mj.campaigns.fruit_suite import (
+        compare_fruit_planners,
+        format_fruit_suite,
+        format_harvests,
+        run_fruit_suites,
+    )
     from bve_mj.campaigns.scenarios import suite_json_clean
     from bve_mj.config import PlannerKind
     from bve_mj.errors import ConfigError
@@ -99,17 +114,27 @@ def _every_fruit(
         if bad or not names:
             raise ConfigError("planners", args.planners, f"distinct names from {', '.join(allowed)}")
         planners = [cast("PlannerKind", p) for p in names]
-    print(f"bve-mj scenarios --fruits all: {len(suite)} scenarios x {seeds} seeds (base seed {seed})")
+    picking = "" if pick is None else f", harvest picking up to {pick} rounds"
+    print(
+        f"bve-mj scenarios --fruits all: {len(suite)} scenarios x {seeds} seeds (base seed {seed}){picking}"
+    )
     show = not args.quiet and sys.stderr.isatty()
     # every planner on each seed in turn, in one pool: a worker builds each seed's scene once
     by_planner = run_fruit_suites(
-        suite, planners, seeds=seeds, seed=seed, workers=workers, progress=progress_printer(show)
+        suite,
+        planners,
+        seeds=seeds,
+        seed=seed,
+        workers=workers,
+        progress=progress_printer(show),
+        pick_rounds=pick,
     )
     results: dict[str, FruitSuiteResult] = {p or "file": r for p, r in by_planner.items()}
     for planner, result in by_planner.items():
         if planner is not None:
             print(f"planner {planner}:")
-        for line in format_fruit_suite({sc.name: result.summary(sc.name) for sc in result.scenarios}):
+        summaries = {sc.name: result.summary(sc.name) for sc in result.scenarios}
+        for line in format_fruit_suite(summaries) + format_harvests(summaries):
             print(line)
     wall_s = next(iter(results.values())).wall_s
     print(f"wall time {wall_s:.1f} s")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from bve_mj.config.fields import (
     FruitsMode,
     _choice,
@@ -118,6 +120,15 @@ class TrackingConfig:
             "within a step shows it, a step towards the side that does)"
         ),
     )
+    pick_rounds: int = field(
+        default=0,
+        metadata=_why(
+            "with episode.approach, the harvest picks each fruit it visits (the fruit and its "
+            "calyx leave the scene: what a picking arm does), then the survey goes on for the "
+            "fruit the picked ones hid, up to this many times (each with the view budget "
+            "episode.views); a round that picks nothing ends it. 0: the harvest only visits"
+        ),
+    )
 
     def __post_init__(self) -> None:
         _choice("tracking", "fruits", self.fruits, FruitsMode)
@@ -130,6 +141,9 @@ class TrackingConfig:
         _positive_int("tracking", "candidates", self.candidates, 32)
         if not isinstance(self.unhide, bool):
             raise ConfigError("tracking.unhide", self.unhide, "true or false")
+        rounds = self.pick_rounds
+        if isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or not 0 <= rounds <= 10:
+            raise ConfigError("tracking.pick_rounds", rounds, "an integer in [0, 10]")
         if not 0.0 <= _number("tracking", "zone_framed_share", self.zone_framed_share) <= 1.0:
             raise ConfigError("tracking.zone_framed_share", self.zone_framed_share, "a number in [0, 1]")
         if not 0.0 <= _number("tracking", "explore_span_deg", self.explore_span_deg) <= 180.0:

@@ -90,6 +90,7 @@ def run_every_fruit(
     seen_in_part: Tracker | None = None,
     coverage: ZoneCoverage | None = None,
     retreat: Callable[[np.ndarray], ViewPlan | None] | None = None,
+    after_picking: bool = False,
 ) -> FruitsResult:
     """Observe from the start pose, then up to ``steps`` times: plan for every fruit, move,
     observe, track; stop when every track is localised and the views span
@@ -111,6 +112,11 @@ def run_every_fruit(
     views have framed ``tracking.zone_framed_share`` of it; until then its exploring views
     aim where a view frames most of what is not framed yet (:meth:`~bve_mj.planning.
     zone_coverage.ZoneCoverage.aim_m`), before they look for new directions.
+
+    ``after_picking``: the survey follows a harvest that took fruit off the plant
+    (:mod:`bve_mj.loop.picking`). The zone was explored before it; what changed is what the
+    picked fruit hid, so the views need only frame the zone anew (not span it again), and a
+    zone with no fruit left is an answer (``converged``), not a fruit never detected.
 
     A planner that fails holds the camera where it is (event ``planner_failed``)."""
     t0 = time.perf_counter()
@@ -178,12 +184,15 @@ def run_every_fruit(
         """The fruit seen in part still worth a view planned for them."""
         return [h for h in views[-1].unmeasured if tried.get(h.id, 0) < tracker.config.delete_misses]
 
+    def spanned() -> bool:
+        return after_picking or explored_deg(seen_from) >= span
+
     def done() -> bool:
         states = views[-1].fruits
         return (
-            bool(states)
+            (bool(states) or after_picking)
             and all(s.localised for s in states)
-            and explored_deg(seen_from) >= span
+            and spanned()
             and not pending()
             and framed()
         )
@@ -216,7 +225,7 @@ def run_every_fruit(
                 if coverage.can_aim:
                     framing = coverage.aim_m(world.p_world_camera)
                     aim = Belief(np.r_[framing, zone.mean[3:]], zone.cov)
-                elif states and explored_deg(seen_from) >= span:
+                elif (states or after_picking) and spanned():
                     outcome = Outcome.INCOMPLETE  # every fruit found is localised; the rest of
                     break  # the zone cannot be framed: no view left that could find one there
             plan, target = _explore(planner, aim, tracker, world, i, events, retreat), EXPLORE
@@ -239,7 +248,8 @@ def run_every_fruit(
         if done():
             outcome = Outcome.CONVERGED
     if outcome is None:
-        outcome = Outcome.MAX_VIEWS if any(v.detections for v in views) else Outcome.NEVER_DETECTED
+        seen = after_picking or any(v.detections for v in views)
+        outcome = Outcome.MAX_VIEWS if seen else Outcome.NEVER_DETECTED
     elif outcome == Outcome.CONVERGED and (tracker.dropped or views[-1].unmeasured):
         outcome = Outcome.INCOMPLETE
     return FruitsResult(tuple(views), time.perf_counter() - t0, outcome)

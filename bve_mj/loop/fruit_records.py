@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -13,8 +14,9 @@ from bve_mj.estimation.tracks import ViewTracking
 from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.planning.plan import PlanStatus
+from bve_mj.sim.scene_model import Fruit
 
-__all__ = ["FruitState", "FruitsResult", "FruitsView"]
+__all__ = ["FruitMatch", "FruitState", "FruitsResult", "FruitsView"]
 
 
 @dataclass(frozen=True)
@@ -37,6 +39,21 @@ class FruitState:
     expected: int
     localised: bool
     filter_belief: Belief | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The track in an episode's ``--json``: estimate, covariance, radius, state."""
+        return {
+            "id": self.id,
+            "estimate_m": self.belief.centre_m.tolist(),
+            "covariance_m2": self.belief.cov[:3, :3].tolist(),
+            "radius_mm": 1e3 * float(self.belief.mean[3]),
+            "radius_sigma_mm": 1e3 * float(math.sqrt(self.belief.cov[3, 3])),
+            "sigma_max_mm": 1e3 * self.belief.sigma_max_m,
+            "confirmed": self.confirmed,
+            "hits": self.hits,
+            "misses": self.misses,
+            "localised": self.localised,
+        }
 
 
 @dataclass(frozen=True)
@@ -80,3 +97,32 @@ class FruitsResult:
     def unmeasured(self) -> tuple[FruitState, ...]:
         """The fruit seen in part but never measured, at the end (see :class:`FruitsView`)."""
         return self.views[-1].unmeasured if self.views else ()
+
+
+@dataclass(frozen=True)
+class FruitMatch:
+    """A true ripe fruit and the confirmed track matched to it (None when none was)."""
+
+    fruit: Fruit
+    track: FruitState | None
+
+    @property
+    def error_mm(self) -> float:
+        if self.track is None:
+            return math.nan
+        return 1e3 * float(np.linalg.norm(self.track.belief.centre_m - self.fruit.centre_m))
+
+    @property
+    def nees(self) -> float:
+        return math.nan if self.track is None else self.track.belief.mahalanobis_sq(self.fruit.centre_m)
+
+    @property
+    def filter_nees(self) -> float:
+        """The NEES of the track's own belief (before the claims; :attr:`nees` where none)."""
+        if self.track is None:
+            return math.nan
+        own = self.track.belief if self.track.filter_belief is None else self.track.filter_belief
+        return own.mahalanobis_sq(self.fruit.centre_m)
+
+    def localised_within(self, mm: float) -> bool:
+        return self.track is not None and self.track.localised and self.error_mm <= mm

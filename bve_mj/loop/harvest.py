@@ -31,6 +31,7 @@ distance between the arm's geoms and every true fruit's geom is measured (MuJoCo
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -80,6 +81,9 @@ class Visit:
         clearance_m: the least distance between the arm's geoms and any true fruit during the
             moves (to the pre-approach pose, in, and back out; ≤ 0: touched).
         reason: why it was not reached (None when it was).
+        picked: the fruit the visit took off the plant (``tracking.pick_rounds`` > 0:
+            :mod:`bve_mj.loop.picking`), by name; None when it took none or picking is off.
+        round: the harvest round it belongs to (0 first; later ones follow a new survey).
     """
 
     track: int
@@ -89,6 +93,8 @@ class Visit:
     true_distance_m: float
     clearance_m: float
     reason: str | None = None
+    picked: str | None = None
+    round: int = 0
 
 
 class RecordsHarvest(Protocol):
@@ -115,6 +121,7 @@ class HarvestResult:
         return {
             "order": list(self.order),
             "rule": "most exposed first (30 deg classes of the outline seen), then nearest",
+            "picked": [v.picked for v in self.visits if v.picked is not None],
             "visits": [vars(v).copy() for v in self.visits],
         }
 
@@ -146,10 +153,13 @@ def harvest(
     info: SceneInfo,
     recorder: RecordsHarvest | None = None,
     seen_in_part: Sequence[FruitState] = (),
+    pick: Callable[[FruitState], str | None] | None = None,
 ) -> HarvestResult:
     """Order the localised fruit and visit each (module docstring), keeping the arm from every
     confirmed track of ``fruits``, every fruit ``seen_in_part`` and the canopy; ``recorder``
-    (a video) is told the order and each visit, and sees every physics step of the moves."""
+    (a video) is told the order and each visit, and sees every physics step of the moves.
+    ``pick(fruit)``: after a visit that reached its pose, take the fruit there off the plant
+    (its name, recorded in :attr:`Visit.picked`; None: nothing there to take)."""
     cam = settings.camera
     localised = [f for f in fruits if f.localised]
     known = Obstacles.of([f for f in fruits if f.confirmed], seen_in_part)
@@ -162,7 +172,10 @@ def harvest(
     for k, tid in enumerate(order):
         if recorder is not None:
             recorder.on_visit(tid)
-        visits.append(_visit(world, by_id[tid], known, settings, info, k, on_step))
+        visit = _visit(world, by_id[tid], known, settings, info, k, on_step)
+        if pick is not None and visit.reached:
+            visit = dataclasses.replace(visit, picked=pick(by_id[tid]))
+        visits.append(visit)
         if recorder is not None:
             recorder.on_visited(visits[-1])
     return HarvestResult(tuple(order), tuple(visits))

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -37,10 +37,11 @@ from bve_mj.loop.arm_clearance import (
 )
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.every_fruit import run_every_fruit
-from bve_mj.loop.fruit_records import FruitsResult, FruitState, FruitsView
+from bve_mj.loop.fruit_records import FruitMatch, FruitsResult, FruitState, FruitsView
 from bve_mj.loop.harvest import HarvestResult, RecordsHarvest, harvest
 from bve_mj.loop.mujoco import INNOVATION_PRIOR_DOF, episode_constraints, episode_settings
 from bve_mj.loop.outcomes import Outcome
+from bve_mj.loop.picking import LOOK_AGAIN_RADII, picked_fruit, survey_and_pick, take_off
 from bve_mj.loop.start import calibration_sigmas, start_episode
 from bve_mj.loop.unhiding import ArmUnhider
 from bve_mj.planning.every_fruit import (
@@ -80,35 +81,6 @@ def ripe_fruit_in_zone(info: SceneInfo, settings: Settings, zone_centre_m: np.nd
         if ripe and np.linalg.norm(f.centre_m - zone_centre_m) <= settings.tracking.zone_m:
             out.append(f)
     return out
-
-
-@dataclass(frozen=True)
-class FruitMatch:
-    """A true ripe fruit and the confirmed track matched to it (None when none was)."""
-
-    fruit: Fruit
-    track: FruitState | None
-
-    @property
-    def error_mm(self) -> float:
-        if self.track is None:
-            return math.nan
-        return 1e3 * float(np.linalg.norm(self.track.belief.centre_m - self.fruit.centre_m))
-
-    @property
-    def nees(self) -> float:
-        return math.nan if self.track is None else self.track.belief.mahalanobis_sq(self.fruit.centre_m)
-
-    @property
-    def filter_nees(self) -> float:
-        """The NEES of the track's own belief (before the claims; :attr:`nees` where none)."""
-        if self.track is None:
-            return math.nan
-        own = self.track.belief if self.track.filter_belief is None else self.track.filter_belief
-        return own.mahalanobis_sq(self.fruit.centre_m)
-
-    def localised_within(self, mm: float) -> bool:
-        return self.track is not None and self.track.localised and self.error_mm <= mm
 
 
 @dataclass(frozen=True)
@@ -191,7 +163,7 @@ class FruitsEpisode:
                     "ignored": list(v.tracking.ignored),
                     "expected": list(v.tracking.expected),
                     "events": [f"{e.kind}:{e.track}" for e in v.tracking.events] + [str(e) for e in v.events],
-                    "tracks": [_track_json(t) for t in v.fruits],
+                    "tracks": [t.to_json() for t in v.fruits],
                     "timings_s": (v.world or {}).get("timings_s"),
                     "zone_framed": None if math.isnan(v.zone_framed) else v.zone_framed,
                 }
@@ -220,29 +192,14 @@ class FruitsEpisode:
             "zone_centre_m": self.zone_centre_m.tolist(),
             "views": views,
             "fruits": fruits,
-            "unmatched_tracks": [_track_json(t) for t in false],
-            "other_tracks": [_track_json(t) for t in other],
-            "seen_in_part": [_track_json(t) for t in self.result.unmeasured],
+            "unmatched_tracks": [t.to_json() for t in false],
+            "other_tracks": [t.to_json() for t in other],
+            "seen_in_part": [t.to_json() for t in self.result.unmeasured],
             "zone_framed": views[-1]["zone_framed"] if views else None,
             "harvest": None if self.harvest is None else self.harvest.to_json(),
             "outcome": self.result.outcome,
             "wall_s": self.result.wall_s,
         }
-
-
-def _track_json(t: FruitState) -> dict[str, Any]:
-    return {
-        "id": t.id,
-        "estimate_m": t.belief.centre_m.tolist(),
-        "covariance_m2": t.belief.cov[:3, :3].tolist(),
-        "radius_mm": 1e3 * float(t.belief.mean[3]),
-        "radius_sigma_mm": 1e3 * float(math.sqrt(t.belief.cov[3, 3])),
-        "sigma_max_mm": 1e3 * t.belief.sigma_max_m,
-        "confirmed": t.confirmed,
-        "hits": t.hits,
-        "misses": t.misses,
-        "localised": t.localised,
-    }
 
 
 def run_every_fruit_episode(
@@ -256,7 +213,7 @@ def run_every_fruit_episode(
 
     Raises:
         ConfigError: when the settings cannot localise every fruit (the camera measurement
-            with the radius in the state is needed).
+            with the radius in the state is needed), or pick without approach mode.
     """
     from bve_mj.errors import ConfigError
     from bve_mj.threads import one_blas_thread
@@ -266,6 +223,8 @@ def run_every_fruit_episode(
         raise ConfigError(
             "tracking.fruits", "all", "with measurement.kind = camera and filter.state = centre_radius"
         )
+    if s.tracking.pick_rounds and not s.episode.approach:  # the harvest picks: approach mode
+        raise ConfigError("tracking.pick_rounds", s.tracking.pick_rounds, "0 unless episode.approach is true")
     # the search runs as a one-target episode without approach mode (with the distance band);
     # approach mode visits the fruit afterwards
     search = episode_settings(with_overrides(settings, episode={"approach": False}))
@@ -373,27 +332,52 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         baseline = make_arm_planner(search, loss, names, kin, q, planner_rng, check.constraints)
         planner = PatternPlanner(check.planner(baseline), zone_belief)
     claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF)
-    coverage = None
-    if s.tracking.zone_framed_share > 0.0:
-        coverage = ZoneCoverage(
-            zone,
-            s.tracking.zone_m,
-            fruit.radius_m,
-            f,
-            cam.width_px,
-            cam.height_px,
-            s.tracking.max_range_m,
-            search.band_distance_m,
-        )
-    try:
+    grid = (zone, s.tracking.zone_m, fruit.radius_m, f, cam.width_px, cam.height_px, s.tracking.max_range_m)
+
+    picked_at: list[np.ndarray] = []  # the fruit picked since the last survey
+
+    views_before = [0]  # the views of the surveys before (a video numbers them on)
+
+    def survey() -> FruitsResult:  # from where the arm is; after a harvest, framing anew around what it took
+        coverage = ZoneCoverage(*grid, search.band_distance_m) if s.tracking.zone_framed_share > 0.0 else None
+        if coverage is not None and picked_at:
+            coverage.look_again_near(np.array(picked_at), LOOK_AGAIN_RADII * fruit.radius_m)
+        picked_at.clear()
+        first = views_before[0]
+
+        def on_view(v: FruitsView) -> None:  # the video numbers the views on
+            if recorder is not None:
+                recorder.on_view(replace(v, iteration=first + v.iteration))
+
         result = run_every_fruit(
             world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims,
-            on_view=None if recorder is None else recorder.on_view, zone=zone_belief,
-            seen_in_part=seen_in_part, coverage=coverage, retreat=retreat,
+            on_view=None if recorder is None else on_view, zone=zone_belief,
+            seen_in_part=seen_in_part, coverage=coverage, retreat=retreat, after_picking=bool(world.picked),
         )  # fmt: skip
-        visits = None
-        if s.episode.approach and result.final:
-            visits = harvest(world, result.final, s, info, recorder, result.unmeasured)
+        views_before[0] += len(result.views)
+        return result
+
+    def pick(state: FruitState) -> str | None:  # the gripper takes the fruit at the estimate
+        name = picked_fruit(state.belief.centre_m, info, world.picked)
+        if name is not None:
+            world.pick(name)
+        return name
+
+    def drop(track_id: int) -> None:  # a picked fruit is in the basket: look again around it
+        picked_at.append(take_off(tracker, seen_in_part, track_id))
+        planner.forget(track_id)
+
+    rounds = s.tracking.pick_rounds
+    try:
+        if not s.episode.approach:
+            result, visits = survey(), None
+        else:
+            result, visits = survey_and_pick(
+                survey,
+                lambda r: harvest(world, r.final, s, info, recorder, r.unmeasured, pick if rounds else None),
+                drop,
+                rounds,
+            )
     finally:
         world.close()
     return FruitsEpisode(result, info, s, seed, zone, visits)

@@ -112,6 +112,17 @@ class ZoneCoverage:
         """Whether some unframed point is left to aim at (not given up)."""
         return bool(np.any(~self.framed & ~self.given_up))
 
+    def look_again_near(self, points_m: np.ndarray, distance_m: float) -> None:
+        """Leave only the grid points within ``distance_m`` of some point of ``points_m`` (k, 3)
+        to frame; the rest count as framed (a survey after a harvest: the zone changed only
+        where fruit were picked, :mod:`bve_mj.loop.picking`)."""
+        pts = np.asarray(points_m, dtype=float).reshape(-1, 3)
+        if not (math.isfinite(distance_m) and distance_m > 0.0) or not np.all(np.isfinite(pts)):
+            raise ValueError(f"look_again_near needs finite points and a distance > 0, got {distance_m!r}")
+        d = np.linalg.norm(self.points_m[:, None, :] - pts[None, :, :], axis=2).min(axis=1, initial=np.inf)
+        self.framed = d > distance_m
+        self.given_up[:] = False
+
     def give_up(self, aim_m: np.ndarray) -> None:
         """A view aimed at ``aim_m`` framed nothing new (the arm cannot frame it within its
         constraints): the unframed points within half the zone's radius of it are not aimed at

@@ -87,6 +87,7 @@ class FruitsRecorder(OutsideVideo):
     def on_view(self, view: FruitsView) -> None:
         if self._writer is None:
             return
+        self._order = self._visiting = None  # a survey's view: a harvest before it is over (picking)
         self._view, self._tracks = view, view.fruits
         self._mark_view()
         w = self.world
@@ -291,7 +292,7 @@ class FruitsRecorder(OutsideVideo):
             )
         ]
         if view.planned_for is None:
-            why = "the start pose"
+            why = "the start pose" if view.iteration == 0 else "after the harvest: looking again"
         elif view.planned_for == EXPLORE:
             why = "planned to explore the work zone"
             if not math.isnan(view.zone_framed):

@@ -28,6 +28,7 @@ from bve_mj.planning.plan import ViewPlan
 from bve_mj.robot.ik import IkOptions, look_at_ik
 from bve_mj.robot.kinematics import ArmKinematics
 from bve_mj.sim.arm import CAMERA_NAME
+from bve_mj.sim.basket import Basket
 from bve_mj.sim.controller import JointTrajectoryController, MoveReport
 from bve_mj.sim.render import OffscreenRenderer
 from bve_mj.sim.scene_model import SceneInfo
@@ -154,6 +155,7 @@ class MujocoWorld:
         self._on_step = on_step
         self.last = _Last()
         self._unmeasured: list[Sighting] = []
+        self.basket = Basket(model, info)  # the fruit picked (tracking.pick_rounds)
 
     def _settings_detector(self) -> Detector:
         """The detector ``detector.kind`` names; synthetic boxes get their own stream (spawned
@@ -377,5 +379,20 @@ class MujocoWorld:
             out["refused"] = len(last.every.refused)
         return out
 
+    @property
+    def picked(self) -> tuple[str, ...]:
+        """The fruit taken off the plant so far (:meth:`pick`), by name, in order."""
+        return self.basket.names
+
+    def pick(self, name: str) -> None:
+        """Take fruit ``name`` off the plant, with its calyx (:meth:`Basket.take`); :meth:`close`
+        puts it back in the compiled scene, which the process's episodes share.
+
+        Raises:
+            KeyError: when the scene has no fruit ``name``, or it was picked already."""
+        self.basket.take(name)
+        mujoco.mj_forward(self.model, self.data)
+
     def close(self) -> None:
+        self.basket.put_back()
         self.renderer.close()

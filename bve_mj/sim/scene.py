@@ -51,6 +51,7 @@ from bve_mj.sim.scene_model import (
     PROBE_CAMERA,
     Fruit,
     SceneInfo,
+    fruit_calyx_name,
 )
 
 __all__ = ["build_scene", "set_probe_pose"]
@@ -117,11 +118,9 @@ def build_scene(
     made: set[str] = set()
     for k, truss in enumerate(crop.trusses):
         parts = _truss_parts(truss, rng)
-        calyces = plants.MeshParts()
-        for f in truss.fruits:
-            calyces.extend(_add_fruit(spec, f, made, rng).arrays())
+        for f in truss.fruits:  # each calyx its own geom: a fruit picked takes it along
+            _add_mesh_geom(spec, fruit_calyx_name(f.name), _add_fruit(spec, f, made, rng), _CALYX)
         _add_mesh_geom(spec, f"truss{k}", parts, _TRUSS)
-        _add_mesh_geom(spec, f"truss{k}_calyces", calyces, _CALYX)
     n_leaves = 0
     if leaves:
         for i, (plant, parts, rgb) in enumerate(crop.leaves):

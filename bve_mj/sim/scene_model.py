@@ -12,7 +12,15 @@ from bve_mj.config import RipenessName
 from bve_mj.sim import plants
 from bve_mj.sim.textures import ripeness_stage
 
-__all__ = ["FRUIT_COLOURS", "PROBE_CAMERA", "RIPENESS", "Fruit", "SceneInfo", "fruit_geom_name"]
+__all__ = [
+    "FRUIT_COLOURS",
+    "PROBE_CAMERA",
+    "RIPENESS",
+    "Fruit",
+    "SceneInfo",
+    "fruit_calyx_name",
+    "fruit_geom_name",
+]
 
 PROBE_CAMERA = "probe"
 
@@ -139,3 +147,9 @@ class SceneInfo:
 
 def fruit_geom_name(name: str) -> str:
     return f"{name}_flesh"
+
+
+def fruit_calyx_name(name: str) -> str:
+    """The geom of a fruit's calyx: a mesh of its own, so that a fruit picked takes its sepals
+    with it (:meth:`bve_mj.sim.mujoco_world.MujocoWorld.pick`)."""
+    return f"{name}_calyx"

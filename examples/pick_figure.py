@@ -1,0 +1,132 @@
+"""A fruit at the back of a cluster, before and after the harvest picked the ones in front.
+
+    python examples/pick_figure.py [EPISODE_SEED] [OUT_DIR]
+
+Runs the every-fruit survey of the suite's ``truss_cluster`` (episode seed, default 9105),
+takes the ripe fruit of the work zone it did not localise that is most hidden seen from the
+aisle, and puts the arm's eye-in-hand camera at the distance band straight in front of it
+(look-at IK). The image there is run through the every-fruit detector twice: with the
+cluster as it grows (left), and with the fruit the survey localised picked
+(:meth:`bve_mj.sim.mujoco_world.MujocoWorld.pick`: each fruit and its calyx leave the scene,
+as ``tracking.pick_rounds`` has the harvest do). Writes OUT_DIR/pick.png (default OUT_DIR:
+out/, which git ignores). White: the hidden fruit's true silhouette; green: the other ripe
+fruit; magenta: the detector's measured fruit. Prints what the detector made of the hidden
+fruit in each image.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import cv2
+import mujoco
+import numpy as np
+
+from bve_mj.campaigns.calibration import fruit_images, matched_fruit
+from bve_mj.campaigns.scenarios import load_suite
+from bve_mj.config import with_overrides
+from bve_mj.estimation.visibility import outline_shown_deg
+from bve_mj.loop.mujoco import episode_settings
+from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
+from bve_mj.loop.start import start_episode
+from bve_mj.perception.all_fruit import detect_all
+from bve_mj.perception.detection import Intrinsics
+from bve_mj.robot import IkOptions, look_at_ik
+from bve_mj.sim.arm import CAMERA_NAME
+from bve_mj.sim.mujoco_world import MujocoWorld
+
+
+def main(seed: int = 9105, out_dir: str = "out") -> None:
+    (scenario,) = load_suite(only=["truss_cluster"])
+    every = with_overrides(scenario.settings(), tracking={"fruits": "all"})
+    survey = run_every_fruit_episode(every, seed)
+    matches, _, _ = survey.matches()
+    taken = [m.fruit for m in matches if m.localised_within(5.0)]
+    missed = [m.fruit for m in matches if not m.localised_within(5.0)]
+    if not taken or not missed:
+        found = f"the survey localised {len(taken)} of {len(matches)}"
+        raise SystemExit(f"episode seed {seed}: {found} ripe fruit: none hidden behind the others to show")
+    s = episode_settings(every)
+    start = start_episode(s, seed)
+    assert start.q_start is not None  # the survey ran: the arm has a ready pose
+    cam = s.camera
+    ripe = [m.fruit for m in matches]
+    centres = np.array([f.centre_m for f in ripe])
+    radii = np.array([f.radius_m for f in ripe])
+    aisle = [c + s.band_distance_m * np.array([-1.0, 0.0, 0.0]) for c in centres]
+    k = min(
+        (ripe.index(f) for f in missed),
+        key=lambda i: outline_shown_deg(
+            i, centres, radii, aisle[i][None], cam.focal_px, cam.width_px, cam.height_px, rims=True
+        )[0],
+    )
+    rng = np.random.default_rng(seed)
+    ik = look_at_ik(start.kin, aisle[k], centres[k], start.q_start, rng, IkOptions(upright=True))
+    if not ik.success:
+        raise SystemExit(f"the arm reaches no aisle view of {ripe[k].name}")
+    world = MujocoWorld(s, start.kin, start.model, start.info, ik.q, centres[k], rng)
+    intr = Intrinsics.from_camera(cam)
+    panels, lines = [], []
+    try:
+        for title in ("as it grows", "front fruit picked"):
+            if title != "as it grows":
+                for fruit in taken:
+                    world.pick(fruit.name)
+            mujoco.mj_forward(world.model, world.data)
+            image = world.renderer.render(world.data, CAMERA_NAME)
+            p, R = start.kin.camera_pose(ik.q)
+            found = detect_all(
+                image, intr, world.fruit_prior, world.measurement, s.detector,
+                up_camera=R.T[:, 2], max_range_m=s.tracking.max_range_m,
+            )  # fmt: skip
+            here = [f for f in ripe if f.name not in world.picked]
+            images = fruit_images(here, p, R, intr)
+            shown = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+            hidden = here.index(ripe[k])
+            for im in images:
+                colour = (255, 255, 255) if im.fruit_index == hidden else (0, 255, 0)
+                c = (round(float(im.centre_px[0])), round(float(im.centre_px[1])))
+                cv2.circle(shown, c, round(im.radius_px), colour, 2 if im.fruit_index == hidden else 1)
+            verdict = "not found"
+            for det in found.detections:
+                c = (round(float(det.centre_px[0])), round(float(det.centre_px[1])))
+                cv2.circle(shown, c, round(det.radius_px), (255, 0, 255), 1)
+                m = matched_fruit(det.centre_px, images)
+                if m is not None and m.fruit_index == hidden:
+                    verdict = f"measured, {det.arc_deg:.0f} deg of outline"
+            if verdict == "not found":
+                why = [
+                    r.reason
+                    for r in found.refused
+                    if r.centre_px is not None
+                    and (m := matched_fruit(r.centre_px, images)) is not None
+                    and m.fruit_index == hidden
+                ]
+                verdict = f"refused: {why[0]}" if why else verdict
+            cv2.putText(shown, title, (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.9, (255, 255, 255), 2)
+            panels.append(shown)
+            lines.append(f"  {title}: {verdict}")
+    finally:
+        world.close()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    gap = np.full((panels[0].shape[0], 8, 3), 255, np.uint8)
+    both = np.hstack([panels[0], gap, panels[1]])
+    small = cv2.resize(both, None, fx=0.75, fy=0.75, interpolation=cv2.INTER_AREA)
+    cv2.imwrite(str(out / "pick.png"), small)
+    names = ", ".join(f.name for f in taken)
+    print(f"truss_cluster episode seed {seed}: the survey localised {len(taken)} of {len(ripe)}: {names}")
+    where = np.round(centres[k], 3).tolist()
+    print(f"{ripe[k].name} at {where} m, seen from the aisle at {s.band_distance_m:.2f} m:")
+    print("\n".join(lines))
+    print(f"wrote {out / 'pick.png'} (as it grows | front fruit picked)")
+
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    if len(args) > 2 or (args and not args[0].isdigit()):
+        allowed = "[EPISODE_SEED (an integer >= 0)] [OUT_DIR]"
+        print(f"pick_figure.py: error: arguments: got {args}; allowed: {allowed}", file=sys.stderr)
+        sys.exit(2)
+    main(int(args[0]) if args else 9105, args[1] if len(args) > 1 else "out")
