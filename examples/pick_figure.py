@@ -23,7 +23,6 @@ import cv2
 import mujoco
 import numpy as np
 
-from bve_mj.campaigns.calibration import fruit_images, matched_fruit
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.config import with_overrides
 from bve_mj.estimation.visibility import outline_shown_deg
@@ -32,6 +31,7 @@ from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
 from bve_mj.loop.start import start_episode
 from bve_mj.perception.all_fruit import detect_all
 from bve_mj.perception.detection import Intrinsics
+from bve_mj.reporting.detector_panel import detector_panel
 from bve_mj.robot import IkOptions, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.mujoco_world import MujocoWorld
@@ -81,30 +81,7 @@ def main(seed: int = 9105, out_dir: str = "out") -> None:
                 up_camera=R.T[:, 2], max_range_m=s.tracking.max_range_m,
             )  # fmt: skip
             here = [f for f in ripe if f.name not in world.picked]
-            images = fruit_images(here, p, R, intr)
-            shown = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
-            hidden = here.index(ripe[k])
-            for im in images:
-                colour = (255, 255, 255) if im.fruit_index == hidden else (0, 255, 0)
-                c = (round(float(im.centre_px[0])), round(float(im.centre_px[1])))
-                cv2.circle(shown, c, round(im.radius_px), colour, 2 if im.fruit_index == hidden else 1)
-            verdict = "not found"
-            for det in found.detections:
-                c = (round(float(det.centre_px[0])), round(float(det.centre_px[1])))
-                cv2.circle(shown, c, round(det.radius_px), (255, 0, 255), 1)
-                m = matched_fruit(det.centre_px, images)
-                if m is not None and m.fruit_index == hidden:
-                    verdict = f"measured, {det.arc_deg:.0f} deg of outline"
-            if verdict == "not found":
-                why = [
-                    r.reason
-                    for r in found.refused
-                    if r.centre_px is not None
-                    and (m := matched_fruit(r.centre_px, images)) is not None
-                    and m.fruit_index == hidden
-                ]
-                verdict = f"refused: {why[0]}" if why else verdict
-            cv2.putText(shown, title, (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.9, (255, 255, 255), 2)
+            shown, verdict = detector_panel(image, here, here.index(ripe[k]), found, p, R, intr, title)
             panels.append(shown)
             lines.append(f"  {title}: {verdict}")
     finally:

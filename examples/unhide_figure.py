@@ -23,7 +23,6 @@ import cv2
 import mujoco
 import numpy as np
 
-from bve_mj.campaigns.calibration import fruit_images, matched_fruit
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.config import with_overrides
 from bve_mj.estimation.visibility import outline_shown_deg
@@ -34,6 +33,7 @@ from bve_mj.perception.all_fruit import detect_all
 from bve_mj.perception.detection import Intrinsics
 from bve_mj.planning.constraints import build_constraints
 from bve_mj.planning.unhide import unhiding_positions
+from bve_mj.reporting.detector_panel import detector_panel
 from bve_mj.robot import IkOptions, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.mujoco_world import declared_noise
@@ -92,29 +92,7 @@ def main(seed: int = 3669142227, out_dir: str = "out") -> None:
                 image, intr, fruit, measurement, s.detector,
                 up_camera=R.T[:, 2], max_range_m=s.tracking.max_range_m,
             )  # fmt: skip
-            images = fruit_images(ripe, p, R, intr)
-            shown_bgr = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
-            for im in images:
-                colour = (255, 255, 255) if im.fruit_index == k else (0, 255, 0)
-                c = (round(float(im.centre_px[0])), round(float(im.centre_px[1])))
-                cv2.circle(shown_bgr, c, round(im.radius_px), colour, 2 if im.fruit_index == k else 1)
-            verdict = "not in the image"
-            for det in found.detections:
-                c = (round(float(det.centre_px[0])), round(float(det.centre_px[1])))
-                cv2.circle(shown_bgr, c, round(det.radius_px), (255, 0, 255), 1)
-                m = matched_fruit(det.centre_px, images)
-                if m is not None and m.fruit_index == k:
-                    verdict = f"measured, {det.arc_deg:.0f} deg of outline"
-            if verdict == "not in the image" and any(im.fruit_index == k for im in images):
-                why = [
-                    r.reason
-                    for r in found.refused
-                    if r.centre_px is not None
-                    and (m := matched_fruit(r.centre_px, images)) is not None
-                    and m.fruit_index == k
-                ]
-                verdict = f"refused: {why[0]}" if why else "not found"
-            cv2.putText(shown_bgr, title, (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.9, (255, 255, 255), 2)
+            shown_bgr, verdict = detector_panel(image, ripe, k, found, p, R, intr, title)
             panels.append(shown_bgr)
             where = np.round(p, 3).tolist()
             lines.append(f"  {title}: camera {where} m, outline predicted {predicted:.0f} deg; {verdict}")
