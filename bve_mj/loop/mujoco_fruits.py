@@ -335,7 +335,6 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     grid = (zone, s.tracking.zone_m, fruit.radius_m, f, cam.width_px, cam.height_px, s.tracking.max_range_m)
 
     picked_at: list[np.ndarray] = []  # the fruit picked since the last survey
-
     views_before = [0]  # the views of the surveys before (a video numbers them on)
 
     def survey() -> FruitsResult:  # from where the arm is; after a harvest, framing anew around what it took

@@ -2,9 +2,11 @@
 fruit the picked ones hid.
 
 In a cluster the fruit behind the front ones show too little of their outline to be measured
-from any view the arm can take (``truss_cluster``: 2 of 7 such fruit measured in two or more of
-15 reachable views; with the fruit in front taken off, 7 of 7, in 9-15 of 15). A picking arm
-does not need to see them first: it picks what it knows, and what it uncovers it then sees.
+from most views the arm can take (``python benchmarks/bench_coverage_oracle.py --scenario
+truss_cluster --episodes 5 --seed 9191 --views 20``: of the 7 ripe fruit the episodes missed,
+3 measured in two or more of 20 reachable views; with ``--picked``, the fruit the episodes
+localised taken off, all 7). A picking arm does not need to see them first: it picks what it
+knows, and what it uncovers it then sees.
 With ``tracking.pick_rounds`` = N > 0 (and ``episode.approach``) the harvest picks every fruit
 its visit reaches (:func:`picked_fruit`: the true fruit within :data:`PICK_TOLERANCE_M` of
 the estimate it went to; a visit to a wrong estimate takes nothing), the fruit and its calyx
@@ -86,8 +88,8 @@ def survey_and_pick(
 
     Args:
         survey: one survey of the zone from where the arm is (the tracker keeps its tracks).
-        harvest_round: the harvest of a survey's localised fruit (None: there are none), its
-            visits saying which fruit each picked.
+        harvest_round: the harvest of a survey's localised fruit, its visits saying which
+            fruit each picked.
         drop: ``drop(track_id)``: a picked fruit's track leaves the tracker and the planner.
         rounds: how many surveys may follow a harvest that picked.
     Returns:
