@@ -107,13 +107,19 @@ def test_survey_and_pick_stops_at_its_rounds_after_a_converged_survey_and_withou
             survey_and_pick(survey, picks, lambda t: None, bad)  # type: ignore[arg-type]
 
 
-def test_a_survey_after_a_harvest_frames_only_the_part_of_the_zone_around_what_it_took():
+def test_a_survey_after_a_harvest_frames_again_the_part_of_the_zone_around_what_it_took():
     zone = ZoneCoverage(np.array([0.4, 0.0, 0.3]), 0.15, 0.03, 554.0, 640, 480, 0.8)
+    zone.framed[:] = True
+    zone.framed[0] = False  # a point no view framed stays to frame
+    zone.given_up[1] = True
     picked = np.array([[0.4, 0.0, 0.3]])
     zone.look_again_near(picked, 0.08)
     near = np.linalg.norm(zone.points_m - picked[0], axis=1) <= 0.08
-    assert near.any() and not near.all()
-    assert np.array_equal(~zone.framed, near)
+    assert near.any() and not near.all() and not near[0]
+    expected = near.copy()
+    expected[0] = True
+    assert np.array_equal(~zone.framed, expected)
+    assert zone.given_up[1] == (not near[1]) and not zone.given_up[near].any()
     for bad in (0.0, math.nan):
         with pytest.raises(ValueError):
             zone.look_again_near(picked, bad)

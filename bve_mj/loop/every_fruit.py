@@ -91,6 +91,8 @@ def run_every_fruit(
     coverage: ZoneCoverage | None = None,
     retreat: Callable[[np.ndarray], ViewPlan | None] | None = None,
     after_picking: bool = False,
+    explored: list[np.ndarray] | None = None,
+    stall_views: int = 0,
 ) -> FruitsResult:
     """Observe from the start pose, then up to ``steps`` times: plan for every fruit, move,
     observe, track; stop when every track is localised and the views span
@@ -114,15 +116,19 @@ def run_every_fruit(
     zone_coverage.ZoneCoverage.aim_m`), before they look for new directions.
 
     ``after_picking``: the survey follows a harvest that took fruit off the plant
-    (:mod:`bve_mj.loop.picking`). The zone was explored before it; what changed is what the
-    picked fruit hid, so the views need only frame the zone anew (not span it again), and a
-    zone with no fruit left is an answer (``converged``), not a fruit never detected.
+    (:mod:`bve_mj.loop.picking`): a zone with no fruit left is an answer (``converged``), not a
+    fruit never detected. ``explored``: the unit directions zone centre → camera of the views
+    of the surveys before (extended with this one's; the views span the zone over all of
+    them). ``stall_views`` (> 0 where a harvest and another survey may follow): the survey
+    also ends (``incomplete``) once a fruit is localised and this many views in a row have
+    localised no other while some fruit is left unlocalised: behind its neighbours, most
+    likely, where picking the ones in front will show it.
 
     A planner that fails holds the camera where it is (event ``planner_failed``)."""
     t0 = time.perf_counter()
     views: list[FruitsView] = []
     span = tracker.config.explore_span_deg
-    seen_from: list[np.ndarray] = []  # unit directions zone centre → camera of every view
+    seen_from = [] if explored is None else explored  # unit directions zone centre → camera of every view
 
     tried: dict[int, int] = {}  # views planned for each fruit seen in part
 
@@ -185,7 +191,14 @@ def run_every_fruit(
         return [h for h in views[-1].unmeasured if tried.get(h.id, 0) < tracker.config.delete_misses]
 
     def spanned() -> bool:
-        return after_picking or explored_deg(seen_from) >= span
+        return explored_deg(seen_from) >= span
+
+    def stalled() -> bool:  # picking: harvest what is localised before hunting the hidden
+        if stall_views <= 0 or len(views) <= stall_views:
+            return False
+        now = sum(s.localised for s in views[-1].fruits)
+        left = not all(s.localised for s in views[-1].fruits) or bool(pending())
+        return left and 1 <= now <= sum(s.localised for s in views[-1 - stall_views].fruits)
 
     def done() -> bool:
         states = views[-1].fruits
@@ -203,6 +216,9 @@ def run_every_fruit(
     for i in range(1, steps + 1):
         if done():
             outcome = Outcome.CONVERGED
+            break
+        if stalled():
+            outcome = Outcome.INCOMPLETE
             break
         states = views[-1].fruits
         targets = [

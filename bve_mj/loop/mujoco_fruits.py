@@ -332,17 +332,22 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         baseline = make_arm_planner(search, loss, names, kin, q, planner_rng, check.constraints)
         planner = PatternPlanner(check.planner(baseline), zone_belief)
     claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF)
+    rounds = s.tracking.pick_rounds
     grid = (zone, s.tracking.zone_m, fruit.radius_m, f, cam.width_px, cam.height_px, s.tracking.max_range_m)
 
     picked_at: list[np.ndarray] = []  # the fruit picked since the last survey
     views_before = [0]  # the views of the surveys before (a video numbers them on)
+    surveys = [0]
+    explored: list[np.ndarray] = []  # every survey's view directions: the span is over all
+    coverage = ZoneCoverage(*grid, search.band_distance_m) if s.tracking.zone_framed_share > 0.0 else None
 
-    def survey() -> FruitsResult:  # from where the arm is; after a harvest, framing anew around what it took
-        coverage = ZoneCoverage(*grid, search.band_distance_m) if s.tracking.zone_framed_share > 0.0 else None
+    def survey() -> FruitsResult:  # from where the arm is; after a harvest, framing again around what it took
         if coverage is not None and picked_at:
             coverage.look_again_near(np.array(picked_at), LOOK_AGAIN_RADII * fruit.radius_m)
         picked_at.clear()
         first = views_before[0]
+        stall = ep.converge_after + 1 if surveys[0] < rounds else 0  # another survey may follow
+        surveys[0] += 1
 
         def on_view(v: FruitsView) -> None:  # the video numbers the views on
             if recorder is not None:
@@ -352,6 +357,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
             world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims,
             on_view=None if recorder is None else on_view, zone=zone_belief,
             seen_in_part=seen_in_part, coverage=coverage, retreat=retreat, after_picking=bool(world.picked),
+            explored=explored, stall_views=stall,
         )  # fmt: skip
         views_before[0] += len(result.views)
         return result
@@ -366,7 +372,6 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         picked_at.append(take_off(tracker, seen_in_part, track_id))
         planner.forget(track_id)
 
-    rounds = s.tracking.pick_rounds
     try:
         if not s.episode.approach:
             result, visits = survey(), None

@@ -113,15 +113,16 @@ class ZoneCoverage:
         return bool(np.any(~self.framed & ~self.given_up))
 
     def look_again_near(self, points_m: np.ndarray, distance_m: float) -> None:
-        """Leave only the grid points within ``distance_m`` of some point of ``points_m`` (k, 3)
-        to frame; the rest count as framed (a survey after a harvest: the zone changed only
-        where fruit were picked, :mod:`bve_mj.loop.picking`)."""
+        """The grid points within ``distance_m`` of some point of ``points_m`` (k, 3) are to be
+        framed again (not given up); the rest keep their state (a survey after a harvest: the
+        zone changed only where fruit were picked, :mod:`bve_mj.loop.picking`)."""
         pts = np.asarray(points_m, dtype=float).reshape(-1, 3)
         if not (math.isfinite(distance_m) and distance_m > 0.0) or not np.all(np.isfinite(pts)):
             raise ValueError(f"look_again_near needs finite points and a distance > 0, got {distance_m!r}")
         d = np.linalg.norm(self.points_m[:, None, :] - pts[None, :, :], axis=2).min(axis=1, initial=np.inf)
-        self.framed = d > distance_m
-        self.given_up[:] = False
+        near = d <= distance_m
+        self.framed &= ~near
+        self.given_up &= ~near
 
     def give_up(self, aim_m: np.ndarray) -> None:
         """A view aimed at ``aim_m`` framed nothing new (the arm cannot frame it within its
