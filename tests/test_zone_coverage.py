@@ -280,11 +280,12 @@ class _SeenPoorly(_World):
 def test_a_survey_that_stalls_on_a_hidden_fruit_ends_for_the_harvest_when_one_may_follow():
     """``stall_views``: once a fruit is localised and that many views in a row localise no
     other while one is left unlocalised, the survey ends (``incomplete``) so that the harvest
-    picks what is known first; without it the survey goes on to its view budget. The views'
-    directions land in ``explored``."""
+    picks what is known first; without it, or when the fruit localised was visited by a
+    harvest before, the survey goes on to its view budget. The views' directions land in
+    ``explored``."""
     beside = CENTRE + np.array([0.0, 0.12, 0.0])
 
-    def run(stall, explored=None):
+    def run(stall, explored=None, visited=()):
         cfg = TrackingConfig(fruits="all", zone_m=0.3)
 
         def visible(c, r, m):
@@ -294,8 +295,9 @@ def test_a_survey_that_stalls_on_a_hidden_fruit_ends_for_the_harvest_when_one_ma
         zone = Belief(np.r_[CENTRE, PRIOR[0]], np.diag([0.15**2] * 3 + [PRIOR[1] ** 2]))
         world = _SeenPoorly([CENTRE, beside])
         return run_every_fruit(
-            world, _Planner(), tracker, 40, 0.002, 3, zone=zone, explored=explored, stall_views=stall
-        )
+            world, _Planner(), tracker, 40, 0.002, 3, zone=zone, explored=explored, stall_views=stall,
+            visited=visited,
+        )  # fmt: skip
 
     explored: list[np.ndarray] = []
     stalled = run(4, explored)
@@ -306,3 +308,7 @@ def test_a_survey_that_stalls_on_a_hidden_fruit_ends_for_the_harvest_when_one_ma
     assert len(explored) == len(stalled.views)
     patient = run(0)
     assert len(patient.views) > len(stalled.views)
+    # the fruit localised was visited by a harvest before (unreachable, say): nothing new to
+    # pick, so the survey does not hand over
+    localised = next(s.id for s in stalled.final if s.localised)
+    assert len(run(4, visited={localised}).views) == len(patient.views)

@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 
 import numpy as np
 
@@ -93,6 +93,7 @@ def run_every_fruit(
     after_picking: bool = False,
     explored: list[np.ndarray] | None = None,
     stall_views: int = 0,
+    visited: Collection[int] = (),
 ) -> FruitsResult:
     """Observe from the start pose, then up to ``steps`` times: plan for every fruit, move,
     observe, track; stop when every track is localised and the views span
@@ -120,7 +121,8 @@ def run_every_fruit(
     fruit never detected. ``explored``: the unit directions zone centre → camera of the views
     of the surveys before (extended with this one's; the views span the zone over all of
     them). ``stall_views`` (> 0 where a harvest and another survey may follow): the survey
-    also ends (``incomplete``) once a fruit is localised and this many views in a row have
+    also ends (``incomplete``) once a fruit the harvest has not visited yet (``visited``: the
+    track ids a harvest before went to) is localised and this many views in a row have
     localised no other while some fruit is left unlocalised: behind its neighbours, most
     likely, where picking the ones in front will show it.
 
@@ -197,8 +199,9 @@ def run_every_fruit(
         if stall_views <= 0 or len(views) <= stall_views:
             return False
         now = sum(s.localised for s in views[-1].fruits)
+        new = any(s.localised and s.id not in visited for s in views[-1].fruits)
         left = not all(s.localised for s in views[-1].fruits) or bool(pending())
-        return left and 1 <= now <= sum(s.localised for s in views[-1 - stall_views].fruits)
+        return new and left and now <= sum(s.localised for s in views[-1 - stall_views].fruits)
 
     def done() -> bool:
         states = views[-1].fruits

@@ -338,6 +338,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     picked_at: list[np.ndarray] = []  # the fruit picked since the last survey
     views_before = [0]  # the views of the surveys before (a video numbers them on)
     surveys = [0]
+    visited: set[int] = set()  # the tracks a harvest went to
     explored: list[np.ndarray] = []  # every survey's view directions: the span is over all
     coverage = ZoneCoverage(*grid, search.band_distance_m) if s.tracking.zone_framed_share > 0.0 else None
 
@@ -357,7 +358,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
             world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims,
             on_view=None if recorder is None else on_view, zone=zone_belief,
             seen_in_part=seen_in_part, coverage=coverage, retreat=retreat, after_picking=bool(world.picked),
-            explored=explored, stall_views=stall,
+            explored=explored, stall_views=stall, visited=visited,
         )  # fmt: skip
         views_before[0] += len(result.views)
         return result
@@ -372,16 +373,16 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         picked_at.append(take_off(tracker, seen_in_part, track_id))
         planner.forget(track_id)
 
+    def harvest_round(r: FruitsResult) -> HarvestResult:
+        done = harvest(world, r.final, s, info, recorder, r.unmeasured, pick if rounds else None)
+        visited.update(v.track for v in done.visits)
+        return done
+
     try:
         if not s.episode.approach:
             result, visits = survey(), None
         else:
-            result, visits = survey_and_pick(
-                survey,
-                lambda r: harvest(world, r.final, s, info, recorder, r.unmeasured, pick if rounds else None),
-                drop,
-                rounds,
-            )
+            result, visits = survey_and_pick(survey, harvest_round, drop, rounds)
     finally:
         world.close()
     return FruitsEpisode(result, info, s, seed, zone, visits)

@@ -12,9 +12,13 @@ its visit reaches (:func:`picked_fruit`: the true fruit within :data:`PICK_TOLER
 the estimate it went to; a visit to a wrong estimate takes nothing), the fruit and its calyx
 leave the scene (:meth:`bve_mj.sim.mujoco_world.MujocoWorld.pick`), its track leaves the
 tracker (the fruit is in the basket, not on the plant), and the survey
-(:func:`bve_mj.loop.every_fruit.run_every_fruit`, with the tracks it kept and its zone grid
-made anew: the scene changed) runs again, then another harvest; at most N such rounds
-after the first, ending at a harvest that picks nothing, or after a survey that ended
+(:func:`bve_mj.loop.every_fruit.run_every_fruit`, with the tracks it kept, the zone's grid
+and the view directions of the surveys before, the grid re-opened within
+:data:`LOOK_AGAIN_RADII` of each fruit picked: the scene changed there) runs again, then
+another harvest. A survey that another may follow hands over to the harvest once a fruit is
+localised and ``episode.converge_after`` + 1 views in a row localise no other while some
+fruit is left (``stall_views``): what is hidden behind the fruit known, picking shows. At
+most N rounds after the first, ending at a harvest that picks nothing, or after a survey that ended
 ``converged`` (every fruit it found localised, the zone explored and framed, nothing seen in
 part or dropped: no sign of a fruit left behind; on the suite's five truss scenes, seeds
 9292 and 9393, no survey that ended so had missed a ripe fruit). Its harvest still picks.
