@@ -31,7 +31,7 @@ from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
 from bve_mj.loop.start import start_episode
 from bve_mj.perception.all_fruit import detect_all
 from bve_mj.perception.detection import Intrinsics
-from bve_mj.reporting.detector_panel import detector_panel
+from bve_mj.reporting.detector_panel import detector_panel, side_by_side
 from bve_mj.robot import IkOptions, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.mujoco_world import MujocoWorld
@@ -88,9 +88,7 @@ def main(seed: int = 9105, out_dir: str = "out") -> None:
         world.close()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    gap = np.full((panels[0].shape[0], 8, 3), 255, np.uint8)
-    both = np.hstack([panels[0], gap, panels[1]])
-    small = cv2.resize(both, None, fx=0.75, fy=0.75, interpolation=cv2.INTER_AREA)
+    small = side_by_side(panels)
     cv2.imwrite(str(out / "pick.png"), small)
     names = ", ".join(f.name for f in taken)
     print(f"truss_cluster episode seed {seed}: the survey localised {len(taken)} of {len(ripe)}: {names}")

@@ -33,7 +33,7 @@ from bve_mj.perception.all_fruit import detect_all
 from bve_mj.perception.detection import Intrinsics
 from bve_mj.planning.constraints import build_constraints
 from bve_mj.planning.unhide import unhiding_positions
-from bve_mj.reporting.detector_panel import detector_panel
+from bve_mj.reporting.detector_panel import detector_panel, side_by_side
 from bve_mj.robot import IkOptions, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.mujoco_world import declared_noise
@@ -100,9 +100,7 @@ def main(seed: int = 3669142227, out_dir: str = "out") -> None:
         renderer.close()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    gap = np.full((panels[0].shape[0], 8, 3), 255, np.uint8)
-    both = np.hstack([panels[0], gap, panels[1]])
-    small = cv2.resize(both, None, fx=0.75, fy=0.75, interpolation=cv2.INTER_AREA)
+    small = side_by_side(panels)
     cv2.imwrite(str(out / "unhide.png"), small)
     print(f"truss_cluster episode seed {seed}: {ripe[k].name} at {np.round(centres[k], 3).tolist()} m")
     print("\n".join(lines))

@@ -27,7 +27,7 @@ from bve_mj.campaigns.spec import episode_seed
 from bve_mj.config import PlannerKind, Settings, with_overrides
 from bve_mj.errors import BveError, ConfigError
 from bve_mj.estimation.belief import Belief
-from bve_mj.sim.scene_model import RIPENESS
+from bve_mj.sim.true_boxes import ripe_colours
 
 if TYPE_CHECKING:
     from bve_mj.loop.mujoco_fruits import FruitsEpisode
@@ -103,9 +103,9 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
 def _picked_others(ep: FruitsEpisode, names: set[str]) -> dict[str, int]:
     """Of the fruit picked that were not the zone's ripe ones: those less ripe than the
     detector's ripe class, and those ripe but outside the work zone (a neighbouring truss's)."""
-    least = RIPENESS.index(ep.settings.detector.ripe_class or "red")
-    colours = {f.name: ("turning" if f.colour == "orange" else f.colour) for f in ep.info.fruits}
-    unripe = sum(1 for n in names if colours[n] not in RIPENESS or RIPENESS.index(colours[n]) < least)
+    ripe = ripe_colours(ep.settings.detector.ripe_class)
+    colours = {f.name: f.colour for f in ep.info.fruits}
+    unripe = sum(1 for n in names if colours[n] not in ripe)
     return {"picked_unripe": unripe, "picked_outside": len(names) - unripe}
 
 

@@ -336,19 +336,20 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     grid = (zone, s.tracking.zone_m, fruit.radius_m, f, cam.width_px, cam.height_px, s.tracking.max_range_m)
 
     picked_at: list[np.ndarray] = []  # the fruit picked since the last survey
-    views_before = [0]  # the views of the surveys before (a video numbers them on)
-    surveys = [0]
+    views_before = 0  # the views of the surveys before (a video numbers them on)
+    surveys = 0
     visited: set[int] = set()  # the tracks a harvest went to
     explored: list[np.ndarray] = []  # every survey's view directions: the span is over all
     coverage = ZoneCoverage(*grid, search.band_distance_m) if s.tracking.zone_framed_share > 0.0 else None
 
     def survey() -> FruitsResult:  # from where the arm is; after a harvest, framing again around what it took
+        nonlocal views_before, surveys
         if coverage is not None and picked_at:
             coverage.look_again_near(np.array(picked_at), LOOK_AGAIN_RADII * fruit.radius_m)
         picked_at.clear()
-        first = views_before[0]
-        stall = ep.converge_after + 1 if surveys[0] < rounds else 0  # another survey may follow
-        surveys[0] += 1
+        first = views_before
+        stall = ep.converge_after + 1 if surveys < rounds else 0  # another survey may follow
+        surveys += 1
 
         def on_view(v: FruitsView) -> None:  # the video numbers the views on
             if recorder is not None:
@@ -360,7 +361,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
             seen_in_part=seen_in_part, coverage=coverage, retreat=retreat, after_picking=bool(world.picked),
             explored=explored, stall_views=stall, visited=visited,
         )  # fmt: skip
-        views_before[0] += len(result.views)
+        views_before += len(result.views)
         return result
 
     def pick(state: FruitState) -> str | None:  # the gripper takes the fruit at the estimate

@@ -14,7 +14,7 @@ from bve_mj.perception.all_fruit import FruitDetections
 from bve_mj.perception.detection import Intrinsics
 from bve_mj.sim.scene_model import Fruit
 
-__all__ = ["detector_panel"]
+__all__ = ["detector_panel", "side_by_side"]
 
 _WHITE, _GREEN, _MAGENTA = (255, 255, 255), (0, 255, 0), (255, 0, 255)  # BGR
 
@@ -57,3 +57,12 @@ def detector_panel(
         verdict = f"refused: {why[0]}" if why else verdict
     cv2.putText(panel, title, (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.9, _WHITE, 2)
     return panel, verdict
+
+
+def side_by_side(panels: Sequence[np.ndarray], scale: float = 0.75) -> np.ndarray:
+    """Panels of one height joined left to right with a white gap of 8 px, scaled by ``scale``."""
+    gap = np.full((panels[0].shape[0], 8, 3), 255, np.uint8)
+    row = [panels[0]]
+    for panel in panels[1:]:
+        row += [gap, panel]
+    return cv2.resize(np.hstack(row), None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
