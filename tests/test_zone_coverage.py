@@ -13,7 +13,7 @@ from bve_mj.estimation.assignment import Sighting
 from bve_mj.estimation.tracks import Tracker
 from bve_mj.estimation.visibility import visible_arc_deg
 from bve_mj.geometry import camera_rotation
-from bve_mj.loop.every_fruit import run_every_fruit
+from bve_mj.loop.every_fruit import SurveyRound, run_every_fruit
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.planning.every_fruit import EXPLORE
 from bve_mj.planning.plan import ViewPlan
@@ -278,7 +278,7 @@ class _SeenPoorly(_World):
 
 
 def test_a_survey_that_stalls_on_a_hidden_fruit_ends_for_the_harvest_when_one_may_follow():
-    """``stall_views``: once a fruit is localised and that many views in a row localise no
+    """``SurveyRound.stall_views``: once a fruit is localised and that many views in a row localise no
     other while one is left unlocalised, the survey ends (``incomplete``) so that the harvest
     picks what is known first; without it, or when the fruit localised was visited by a
     harvest before, the survey goes on to its view budget. The views' directions land in
@@ -294,10 +294,8 @@ def test_a_survey_that_stalls_on_a_hidden_fruit_ends_for_the_harvest_when_one_ma
         tracker = Tracker(cfg, CENTRE, PRIOR, filter_update("ekf", 10), visible)
         zone = Belief(np.r_[CENTRE, PRIOR[0]], np.diag([0.15**2] * 3 + [PRIOR[1] ** 2]))
         world = _SeenPoorly([CENTRE, beside])
-        return run_every_fruit(
-            world, _Planner(), tracker, 40, 0.002, 3, zone=zone, explored=explored, stall_views=stall,
-            visited=visited,
-        )  # fmt: skip
+        survey_round = SurveyRound(False, [] if explored is None else explored, stall, frozenset(visited))
+        return run_every_fruit(world, _Planner(), tracker, 40, 0.002, 3, zone=zone, survey_round=survey_round)
 
     explored: list[np.ndarray] = []
     stalled = run(4, explored)

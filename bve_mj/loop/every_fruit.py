@@ -23,7 +23,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Collection
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,12 +44,36 @@ from bve_mj.planning.zone_coverage import ZoneCoverage
 from bve_mj.sim.world import ReportsUnmeasured, SeesEveryFruit
 
 __all__ = [
+    "SurveyRound",
     "claimed",
     "explored_deg",
     "run_every_fruit",
     "seen_in_part_id",
     "seen_in_part_key",
 ]
+
+
+@dataclass(frozen=True)
+class SurveyRound:
+    """A survey among picking rounds (:mod:`bve_mj.loop.picking`): what the rounds before
+    leave it, and when it hands over to a harvest.
+
+    Attributes:
+        after_picking: a harvest before took fruit off the plant: a zone with no fruit left
+            is an answer (``converged``), not a fruit never detected.
+        explored: the unit directions zone centre → camera of the views of the surveys
+            before; this survey extends the list (the views span the zone over all of them).
+        stall_views: > 0 where a harvest and another survey may follow: the survey also ends
+            (``incomplete``) once a fruit no harvest has visited yet (``visited``: the track
+            ids a harvest before went to) is localised and this many views in a row have
+            localised no other while some fruit is left unlocalised: behind its neighbours,
+            most likely, where picking the ones in front will show it.
+    """
+
+    after_picking: bool = False
+    explored: list[np.ndarray] = field(default_factory=list)
+    stall_views: int = 0
+    visited: frozenset[int] = frozenset()
 
 
 def claimed(track: Track, claims: Claims | None, stop_sigma_m: float, converge_after: int) -> FruitState:
@@ -90,10 +115,7 @@ def run_every_fruit(
     seen_in_part: Tracker | None = None,
     coverage: ZoneCoverage | None = None,
     retreat: Callable[[np.ndarray], ViewPlan | None] | None = None,
-    after_picking: bool = False,
-    explored: list[np.ndarray] | None = None,
-    stall_views: int = 0,
-    visited: Collection[int] = (),
+    survey_round: SurveyRound | None = None,
 ) -> FruitsResult:
     """Observe from the start pose, then up to ``steps`` times: plan for every fruit, move,
     observe, track; stop when every track is localised and the views span
@@ -116,21 +138,18 @@ def run_every_fruit(
     aim where a view frames most of what is not framed yet (:meth:`~bve_mj.planning.
     zone_coverage.ZoneCoverage.aim_m`), before they look for new directions.
 
-    ``after_picking``: the survey follows a harvest that took fruit off the plant
-    (:mod:`bve_mj.loop.picking`): a zone with no fruit left is an answer (``converged``), not a
-    fruit never detected. ``explored``: the unit directions zone centre → camera of the views
-    of the surveys before (extended with this one's; the views span the zone over all of
-    them). ``stall_views`` (> 0 where a harvest and another survey may follow): the survey
-    also ends (``incomplete``) once a fruit the harvest has not visited yet (``visited``: the
-    track ids a harvest before went to) is localised and this many views in a row have
-    localised no other while some fruit is left unlocalised: behind its neighbours, most
-    likely, where picking the ones in front will show it.
+    ``survey_round``: the survey is one of the picking rounds (:class:`SurveyRound`); None: the
+    only survey.
 
     A planner that fails holds the camera where it is (event ``planner_failed``)."""
     t0 = time.perf_counter()
     views: list[FruitsView] = []
     span = tracker.config.explore_span_deg
-    seen_from = [] if explored is None else explored  # unit directions zone centre → camera of every view
+    survey_round = SurveyRound() if survey_round is None else survey_round
+    after_picking, stall_views, visited = (
+        survey_round.after_picking, survey_round.stall_views, survey_round.visited,
+    )  # fmt: skip
+    seen_from = survey_round.explored  # unit directions zone centre → camera of every view
 
     tried: dict[int, int] = {}  # views planned for each fruit seen in part
 

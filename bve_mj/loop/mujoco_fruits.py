@@ -36,7 +36,7 @@ from bve_mj.loop.arm_clearance import (
     retreat_view,
 )
 from bve_mj.loop.claims import Claims
-from bve_mj.loop.every_fruit import run_every_fruit
+from bve_mj.loop.every_fruit import SurveyRound, run_every_fruit
 from bve_mj.loop.fruit_records import FruitMatch, FruitsResult, FruitState, FruitsView
 from bve_mj.loop.harvest import HarvestResult, RecordsHarvest, harvest
 from bve_mj.loop.mujoco import INNOVATION_PRIOR_DOF, episode_constraints, episode_settings
@@ -358,8 +358,8 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         result = run_every_fruit(
             world, planner, tracker, ep.views, ep.stop_sigma_m, ep.converge_after, claims,
             on_view=None if recorder is None else on_view, zone=zone_belief,
-            seen_in_part=seen_in_part, coverage=coverage, retreat=retreat, after_picking=bool(world.picked),
-            explored=explored, stall_views=stall, visited=visited,
+            seen_in_part=seen_in_part, coverage=coverage, retreat=retreat,
+            survey_round=SurveyRound(bool(world.picked), explored, stall, frozenset(visited)),
         )  # fmt: skip
         views_before += len(result.views)
         return result

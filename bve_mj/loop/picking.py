@@ -3,25 +3,26 @@ fruit the picked ones hid.
 
 In a cluster the fruit behind the front ones show too little of their outline to be measured
 from most views the arm can take (``python benchmarks/bench_coverage_oracle.py --scenario
-truss_cluster --episodes 5 --seed 9191 --views 20``: of the 7 ripe fruit the episodes missed,
-3 measured in two or more of 20 reachable views; with ``--picked``, the fruit the episodes
-localised taken off, all 7). A picking arm does not need to see them first: it picks what it
-knows, and what it uncovers it then sees.
-With ``tracking.pick_rounds`` = N > 0 (and ``episode.approach``) the harvest picks every fruit
-its visit reaches (:func:`picked_fruit`: the true fruit within :data:`PICK_TOLERANCE_M` of
-the estimate it went to; a visit to a wrong estimate takes nothing), the fruit and its calyx
-leave the scene (:meth:`bve_mj.sim.mujoco_world.MujocoWorld.pick`), its track leaves the
-tracker (the fruit is in the basket, not on the plant), and the survey
+truss_cluster --episodes 5 --seed 9191 --views 20``: of the 7 ripe fruit the episodes
+missed, 3 measured in two or more of 20 reachable views; with ``--picked``, the fruit the
+episodes localised taken off, all 7). A picking arm does not need to see them first: it
+picks what it knows, and what it uncovers it then sees. With ``tracking.pick_rounds`` = N >
+0 (and ``episode.approach``) the harvest picks every fruit its visit reaches
+(:func:`picked_fruit`: the true fruit within :data:`PICK_TOLERANCE_M` of the estimate it
+went to; a visit to a wrong estimate takes nothing), the fruit and its calyx leave the scene
+(:meth:`bve_mj.sim.mujoco_world.MujocoWorld.pick`), its track leaves the tracker (the fruit
+is in the basket, not on the plant), and the survey
 (:func:`bve_mj.loop.every_fruit.run_every_fruit`, with the tracks it kept, the zone's grid
 and the view directions of the surveys before, the grid re-opened within
 :data:`LOOK_AGAIN_RADII` of each fruit picked: the scene changed there) runs again, then
 another harvest. A survey that another may follow hands over to the harvest once a fruit is
 localised and ``episode.converge_after`` + 1 views in a row localise no other while some
-fruit is left (``stall_views``): what is hidden behind the fruit known, picking shows. At
-most N rounds after the first, ending at a harvest that picks nothing, or after a survey that ended
-``converged`` (every fruit it found localised, the zone explored and framed, nothing seen in
-part or dropped: no sign of a fruit left behind; on the suite's five truss scenes, seeds
-9292 and 9393, no survey that ended so had missed a ripe fruit). Its harvest still picks.
+fruit is left (:attr:`~bve_mj.loop.every_fruit.SurveyRound.stall_views`): what is hidden
+behind the fruit known, picking shows. At most N rounds after the first, ending at a harvest
+that picks nothing, or after a survey that ended ``converged`` (every fruit it found
+localised, the zone explored and framed, nothing seen in part or dropped: no sign of a fruit
+left behind; on the suite's five truss scenes, seeds 9292 and 9393, no survey that ended so
+had missed a ripe fruit). Its harvest still picks.
 
 The episode's record joins the rounds: the views in order (numbered on), each later view's
 fruit with the picked ones as they were when picked (so "every ripe fruit localised" and the
