@@ -129,3 +129,40 @@ def test_every_fruit_video_reads_back_and_leaves_the_episode_unchanged(tmp_path,
         assert main(["episode", "--fruits", "all", "--config", config, *argv]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and field in err
+
+
+def test_the_visit_panel_labels_the_fruit_just_picked_and_leaves_out_those_picked_before(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from types import SimpleNamespace
+
+    from bve_mj.config import Settings
+    from bve_mj.loop.harvest import Visit
+
+    written: list[str] = []
+    real = cv2.putText
+
+    def put_text(img: np.ndarray, text: str, *args: Any, **kwargs: Any) -> Any:
+        written.append(text)
+        return real(img, text, *args, **kwargs)
+
+    monkeypatch.setattr(cv2, "putText", put_text)
+    settings = Settings()
+    cam = settings.camera
+    # the camera at the origin looking along +x (R_world_camera = I: x optical, z up)
+    black = np.zeros((cam.height_px, cam.width_px, 3), np.uint8)
+    world = SimpleNamespace(
+        renderer=SimpleNamespace(render=lambda data, name: black),
+        kin=SimpleNamespace(camera_pose=lambda q: (np.zeros(3), np.eye(3))),
+        data=None, q=np.zeros(6), settings=settings,
+    )  # fmt: skip
+    rec = FruitsRecorder("unused.mp4")
+    rec._world, rec._writer = world, object()  # type: ignore[assignment]
+    monkeypatch.setattr(rec, "_hold", lambda: None)
+    rec._tracks = tuple(_state(i, [0.4, y, 0.0], 0.001, True, True) for i, y in ((0, 0.05), (1, -0.05)))
+    rec.on_order([0, 1])
+    rec.on_visited(Visit(0, 0, True, 0.1, 0.1, 0.05, None, "f0"))  # the first visit takes fruit f0
+    assert {"#0 picked", "#1"} <= set(written)
+    written.clear()
+    rec.on_visited(Visit(1, 1, True, 0.1, 0.1, 0.05, None, None))  # the second takes nothing
+    assert "#1" in written and not any(t.startswith("#0") for t in written)

@@ -74,6 +74,7 @@ class FruitsRecorder(OutsideVideo):
         self._view: FruitsView | None = None
         self._order: dict[int, int] | None = None
         self._visiting: int | None = None
+        self._picked: set[int] = set()  # tracks whose fruit a visit took off the plant
         self._strip_top: bool | None = None
 
     # -- wiring
@@ -105,6 +106,8 @@ class FruitsRecorder(OutsideVideo):
         if self._writer is None:
             return
         self._eye = self._visit_panel(visit)
+        if visit.picked is not None:
+            self._picked.add(visit.track)
         self._hold()
 
     # -- the outside camera
@@ -308,13 +311,17 @@ class FruitsRecorder(OutsideVideo):
 
     def _visit_panel(self, visit: Visit) -> np.ndarray:
         """The camera's image at a visited fruit (no sensor noise), the localised tracks'
-        discs drawn where their estimates project, the visited one in white."""
+        discs drawn where their estimates project, the visited one in white (labelled
+        ``picked`` when this visit took it; the fruit earlier visits took are not drawn)."""
         w = self.world
         image = w.renderer.render(w.data, CAMERA_NAME)
         from bve_mj.estimation.visibility import image_discs
 
         p, R = w.kin.camera_pose(w.q)
-        tracks = [t for t in self._tracks if self._order is not None and t.id in self._order]
+        tracks = [
+            t for t in self._tracks
+            if self._order is not None and t.id in self._order and t.id not in self._picked
+        ]  # fmt: skip
         marks = []
         if tracks:
             cam = w.settings.camera
@@ -325,8 +332,9 @@ class FruitsRecorder(OutsideVideo):
                 inside = -r < c[0] < cam.width_px + r and -r < c[1] < cam.height_px + r
                 if ok and inside:
                     mine = t.id == visit.track
+                    label = f"#{t.id}" + (" picked" if mine and visit.picked is not None else "")
                     marks.append(
-                        Mark((float(c[0]), float(c[1])), float(r), f"#{t.id}",
+                        Mark((float(c[0]), float(c[1])), float(r), label,
                              _WHITE if mine else state_colour(t), 2 if mine else 1)
                     )  # fmt: skip
         n = 0 if self._order is None else len(self._order)
