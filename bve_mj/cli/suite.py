@@ -4,6 +4,7 @@ detector's noise calibration."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -51,7 +52,7 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
                 raise ConfigError(
                     name, getattr(args, name), "not with --fruits all (camera, ekf, centre_radius)"
                 )
-        return _every_fruit(args, suite, seeds, seed, workers or 1, json_path, pick)
+        return _every_fruit(args, suite, seeds, seed, workers or os.cpu_count() or 1, json_path, pick)
     print(
         f"bve-mj scenarios: {len(suite)} scenarios x {seeds} seeds (base seed {seed}), measurement "
         f"{args.measurement or 'from each file'}, filter {args.filter or 'from each file'}, state "
