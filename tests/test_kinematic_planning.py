@@ -186,3 +186,64 @@ def test_planned_views_are_upright_where_the_arm_allows():
     # measured: median 14° with the preference (the joint limits leave some rolls), 97° without
     assert np.median(rolls[0.1]) <= math.radians(25.0)
     assert np.median(rolls[0.0]) > math.radians(60.0)
+
+
+def test_a_joint_space_run_halts_once_its_objective_stalls_at_a_feasible_iterate():
+    from bve_mj.robot.planner import _STALL_ITERATIONS, _stalled
+
+    q = np.zeros(6)
+    falling = _stalled(lambda q: True)
+    assert not any(falling(q, -50.0 - k) for k in range(30))  # one nat an iteration: never
+    flat = _stalled(lambda q: True)
+    halts = [flat(q, -50.0 - 1e-6 * k) for k in range(_STALL_ITERATIONS + 2)]
+    assert halts == [False] * _STALL_ITERATIONS + [True, True]  # after the window of iterations
+    infeasible = _stalled(lambda q: False)
+    assert not any(infeasible(q, -50.0) for _ in range(30))  # never at an infeasible iterate
+
+
+def test_the_second_start_runs_only_where_the_first_run_stays_near_the_view_just_taken(monkeypatch):
+    """The first run starts from the current configuration; where it ends feasible and three
+    quarters of a step or more from the camera, the seed direction's run is skipped; where it
+    does not, the seed direction's run follows (where a seed direction meets the task's
+    constraints: not always)."""
+    import bve_mj.robot.planner as planner_module
+    from bve_mj.planning.bve import SEED_DIRECTIONS
+
+    runs: list[np.ndarray] = []  # each look-at run's end configuration (not the restoring one)
+    real = planner_module.minimize_slsqp
+
+    def counted(*args, **kwargs):
+        res = real(*args, **kwargs)
+        if kwargs.get("eq"):
+            runs.append(res.x)
+        return res
+
+    monkeypatch.setattr(planner_module, "minimize_slsqp", counted)
+    settings = Settings()
+    e = EXPERIMENTS["E5"]
+    kin = ArmKinematics(get_robot("manipulator_h"), "emanual")
+    rng = np.random.default_rng(3)
+    seen = {True: 0, False: 0}  # plans whose first run left the view just taken, and the others
+    for _ in range(6):
+        k = np.array([rng.uniform(0.3, 0.5), rng.uniform(-0.3, 0.3), rng.uniform(0.1, 0.5)])
+        belief = Belief.isotropic(k, 0.05)
+        planner = KinematicBvePlanner(settings, e.loss, e.constraints, kin, kin.home, "joint", rng)
+        camera = kin.camera_pose(kin.home)[0]
+        task = build_constraints(e.constraints, settings, belief.mean)
+        for i in range(1, 4):
+            runs.clear()
+            plan = planner.plan(belief, camera, i)
+            p, R = kin.camera_pose(kin.clip(runs[0]))
+            d = (k - p) / np.linalg.norm(k - p)
+            feasible = (
+                math.acos(min(1.0, R[:, 0] @ d)) <= 1e-3
+                and max(g.value(p) for g in task) <= settings.planner.feasibility_tol
+                and np.linalg.norm(p - camera) <= settings.step_m + 1e-6
+            )
+            left = feasible and np.linalg.norm(p - camera) >= 0.75 * settings.step_m
+            seeds = camera + 0.9 * settings.step_m * SEED_DIRECTIONS  # the seed directions' points
+            second = any(max(g.value(x) for g in task) <= settings.planner.feasibility_tol for x in seeds)
+            assert len(runs) == (1 if left or not second else 2)
+            seen[left] += 1
+            camera = plan.p_world_camera
+    assert seen[True] and seen[False]  # both ways exercised

@@ -137,3 +137,65 @@ def test_other_scipy_versions_call_minimize(monkeypatch: pytest.MonkeyPatch, laz
     fun = (lambda x: (problem.f(x)[0], lambda: problem.f(x)[1])) if lazy else problem.f
     slow = driver.minimize_slsqp(fun, x0, lazy=lazy, **kwargs)  # type: ignore[arg-type]
     assert np.array_equal(fast.x, slow.x) and fast.fun == slow.fun and fast.nit == slow.nit
+
+
+@pytest.mark.parametrize("case", range(8))
+def test_halt_stops_where_a_callback_raising_stop_iteration_stops_minimize(case: int) -> None:
+    """``halt(x, f)`` is called after each major iteration with the iterate ``minimize`` passes
+    its callback; True stops the run there, as a callback raising StopIteration stops
+    ``minimize``: the same point, value, counts, status and calls."""
+    rng = np.random.default_rng(case)
+    n = 3 + case % 4
+    x0 = rng.normal(size=n)
+    bounds = [(-0.8, 0.9)] * n if case % 2 else None
+    stop_after = 2 + case % 3
+    seen_ref: list[tuple[tuple[float, ...], float]] = []
+
+    def callback(intermediate_result) -> None:
+        seen_ref.append((tuple(intermediate_result.x), float(intermediate_result.fun)))
+        if len(seen_ref) >= stop_after:
+            raise StopIteration
+
+    log_ref: list[tuple[str, tuple[float, ...]]] = []
+    ref = Logged(log_ref, np.random.default_rng(100 + case), n)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        expected = minimize(
+            ref.f, x0, jac=True, method="SLSQP", bounds=bounds, callback=callback,
+            constraints=[{"type": "ineq", "fun": ref.ineq, "jac": ref.ineq_jac}],
+            options={"maxiter": 100, "ftol": 1e-10},
+        )  # fmt: skip
+    seen: list[tuple[tuple[float, ...], float]] = []
+
+    def halt(x: np.ndarray, f: float) -> bool:
+        seen.append((tuple(x), float(f)))
+        return len(seen) >= stop_after
+
+    log: list[tuple[str, tuple[float, ...]]] = []
+    ours = Logged(log, np.random.default_rng(100 + case), n)
+    got = minimize_slsqp(
+        ours.f, x0, ineq=[(ours.ineq, ours.ineq_jac)], bounds=bounds, maxiter=100, ftol=1e-10, halt=halt
+    )
+    assert seen == seen_ref and len(seen) == stop_after
+    assert np.array_equal(got.x, expected.x) and got.fun == expected.fun
+    assert (got.nit, got.nfev, got.status, got.success) == (
+        expected.nit, expected.nfev, expected.status, expected.success,
+    )  # fmt: skip
+    assert got.message == expected.message and log == log_ref
+
+
+def test_other_scipy_versions_halt_where_the_driver_does(monkeypatch: pytest.MonkeyPatch) -> None:
+    import bve_mj.planning.slsqp as driver
+
+    problem = Logged([], np.random.default_rng(8), 4)
+    x0 = np.full(4, 0.2)
+    kwargs = {"ineq": [(problem.ineq, problem.ineq_jac)], "bounds": [(-1.0, 1.0)] * 4, "ftol": 1e-10}
+
+    def after(k: int):
+        calls: list[float] = []
+        return lambda x, f: calls.append(f) or len(calls) >= k
+
+    fast = driver.minimize_slsqp(problem.f, x0, halt=after(2), **kwargs)  # type: ignore[arg-type]
+    monkeypatch.setattr(driver, "FAST_PATH", False)
+    slow = driver.minimize_slsqp(problem.f, x0, halt=after(2), **kwargs)  # type: ignore[arg-type]
+    assert np.array_equal(fast.x, slow.x) and (fast.nit, fast.status) == (slow.nit, slow.status) == (2, 99)

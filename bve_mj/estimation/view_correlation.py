@@ -39,6 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import bve_mj.linalg as la
 from bve_mj.estimation.models import BearingSizeModel, MeasurementModel, SizeModel
 
 __all__ = ["TakenViews", "ViewCorrelation", "discounted", "fit_view_correlation", "new_view_share"]
@@ -102,7 +103,7 @@ class TakenViews:
         if not len(self._a):
             return 1.0, np.zeros(3)
         b = self.corr.rho(self.directions @ e)
-        u = np.linalg.solve(self._C, b)  # C⁻¹ b
+        u = la.solve(self._C, b)  # C⁻¹ b (np.linalg.solve's bits without its per-call checks)
         m = 1.0 - float(b @ self._a)
         s = max(1.0 - float(b @ u), 1e-12)
         share = min(max(m * m / s, 1e-9), 1.0)

@@ -191,8 +191,13 @@ class FailedViewDiscount:
         g, rate, dcos = failed_view_kernel(self.failed, c, x_hat[:3], self.width_rad)
         q, dq = 1.0 - g, rate[:, None] * -dcos  # ∂q_j/∂c = -∂g_j/∂c
         p = float(np.prod(q))
-        others = np.array([np.prod(np.delete(q, j)) for j in range(len(q))])
-        return p, others @ dq
+        # Π_{i≠j} q_i for every j: the products before j times those after it (no division:
+        # a q_j of 0 is exact there)
+        if len(q) == 0:
+            return p, np.zeros(3)
+        before = np.cumprod(np.r_[1.0, q[:-1]])
+        after = np.cumprod(np.r_[1.0, q[:0:-1]])[::-1]
+        return p, (before * after) @ dq
 
     def information(self, c: np.ndarray, x_hat: np.ndarray) -> np.ndarray:
         return self.odds(c, x_hat)[0] * self.base.information(c, x_hat)

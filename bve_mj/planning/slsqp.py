@@ -52,7 +52,9 @@ _EXIT_MODES = {
     7: "Rank-deficient equality constraint subproblem HFTI",
     8: "Positive directional derivative for linesearch",
     9: "Iteration limit reached",
+    99: "`callback` raised `StopIteration`.",  # ``minimize``'s status where a callback halts it
 }
+_HALTED = 99
 
 
 @dataclass(frozen=True)
@@ -78,6 +80,7 @@ def minimize_slsqp(
     maxiter: int = 100,
     ftol: float = 1e-6,
     lazy: bool = False,
+    halt: Callable[[np.ndarray, float], bool] | None = None,
 ) -> SlsqpResult:
     """``minimize(fun, x0, jac=True, method="SLSQP", bounds=bounds, constraints=[{"type":
     "ineq", "fun": f, "jac": j} for f, j in ineq] + [... "eq" ...], options={"maxiter":
@@ -86,7 +89,11 @@ def minimize_slsqp(
 
     ``lazy``: ``fun`` returns (value, a function that computes the gradient), called only
     where SLSQP asks for the gradient (not at a line search's rejected trial points): the
-    same result when it returns the same bits as the eager gradient."""
+    same result when it returns the same bits as the eager gradient.
+
+    ``halt(x, f)``: called after each major iteration, as ``minimize`` calls a ``callback``;
+    True stops the run there (``minimize``'s callback raising ``StopIteration``: the same
+    result, status 99, not a success)."""
     if not FAST_PATH:
         if lazy:
             eager = fun
@@ -95,7 +102,7 @@ def minimize_slsqp(
                 value, gradient = eager(p)
                 return value, gradient()
 
-        return _with_scipy(fun, x0, ineq, eq, bounds, maxiter, ftol)
+        return _with_scipy(fun, x0, ineq, eq, bounds, maxiter, ftol, halt)
     x = np.asarray(x0, dtype=float).reshape(-1).copy()
     n = x.size
     if bounds is None or len(bounds) == 0:
@@ -110,7 +117,7 @@ def minimize_slsqp(
         if np.any(ub < lb):
             raise ValueError("An upper bound is less than the corresponding lower bound.")
         if np.all(lb == ub):  # pragma: no cover - SciPy then evaluates at the bounds instead
-            return _with_scipy(fun, x0, ineq, eq, bounds, maxiter, ftol)
+            return _with_scipy(fun, x0, ineq, eq, bounds, maxiter, ftol, halt)
         x = np.clip(x, lb, ub)
         xl = np.where(np.isfinite(lb), lb, np.nan)
         xu = np.where(np.isfinite(ub), ub, np.nan)
@@ -178,6 +185,7 @@ def minimize_slsqp(
     if m:
         normals()
         values()
+    iter_prev = 0
     while True:
         _slsqp_c(state, fx, g, C, d, x, mult, xl, xu, buffer, indices)
         mode = state["mode"]
@@ -196,8 +204,11 @@ def minimize_slsqp(
                 grad_asked = True
             if m:
                 normals()
+        if halt is not None and state["iter"] > iter_prev and halt(np.copy(x), fx):
+            return SlsqpResult(x, fx, state["iter"], nfev, _HALTED, False, _EXIT_MODES[_HALTED])
         if abs(mode) != 1:
             break
+        iter_prev = state["iter"]
     mode = state["mode"]
     return SlsqpResult(x, fx, state["iter"], nfev, mode, mode == 0, _EXIT_MODES[mode])
 
@@ -210,14 +221,20 @@ def _with_scipy(
     bounds: Sequence[tuple[float | None, float | None]] | None,
     maxiter: int,
     ftol: float,
+    halt: Callable[[np.ndarray, float], bool] | None = None,
 ) -> SlsqpResult:
-    from scipy.optimize import minimize
+    from scipy.optimize import OptimizeResult, minimize
 
     constraints = [{"type": "ineq", "fun": f, "jac": j} for f, j in ineq]
     constraints += [{"type": "eq", "fun": f, "jac": j} for f, j in eq]
+
+    def callback(intermediate_result: OptimizeResult) -> None:
+        if halt is not None and halt(intermediate_result.x, intermediate_result.fun):
+            raise StopIteration
+
     res = minimize(
         fun, x0, jac=True, method="SLSQP", bounds=bounds, constraints=constraints,
-        options={"maxiter": maxiter, "ftol": ftol},
+        options={"maxiter": maxiter, "ftol": ftol}, callback=None if halt is None else callback,
     )  # fmt: skip
     return SlsqpResult(
         np.asarray(res.x), res.fun, int(res.nit), int(res.nfev), int(res.status), bool(res.success),

@@ -6,9 +6,12 @@ Two formulations (``RobotConfig.formulation``):
   task constraint act on it through the camera Jacobian; the optical axis must pass
   through the estimate (two equalities, y_C·d = z_C·d = 0, and x_C·d ≥ 0); joint limits are
   bounds. Seeds: the current configuration and the best of the BVE's seed points mapped
-  into joint space by one pseudo-inverse step. When no seed reaches a feasible pose, an
-  elastic joint-space problem (min t s.t. g_i ≤ t, 1 - x_C·d ≤ t, step limit) turns the arm
-  towards one, a step at a time, flagged ``restoring``.
+  into joint space by one pseudo-inverse step, the second only where the first run fails or
+  ends near the view just taken (closer than three quarters of a step); each run stops
+  where its objective has stalled at a feasible iterate (:func:`_stalled`). When no seed
+  reaches a feasible pose, an elastic joint-space problem (min t s.t. g_i ≤ t,
+  1 - x_C·d ≤ t, step limit) turns the arm towards one, a step at a time, flagged
+  ``restoring``.
 - ``cartesian``: the kinematics-free BVE over the camera position with one more task
   constraint, :class:`Reachability`: the look-at IK residual at c (warm-started), with a
   finite-difference gradient. Measured: ~1000x slower and rarely feasible (the residual is
@@ -48,6 +51,13 @@ __all__ = ["KinematicBvePlanner", "Reachability", "make_arm_planner"]
 
 _AXIS_TOL_RAD = 1e-3
 _PLAN_IK = IkOptions(restarts=1, max_iterations=40)  # inside a plan the seed (current q) is close
+_LEFT_START = 0.75
+"""A run from the current configuration that moves the camera this share of the step limit
+or more has left the view just taken: no second start (``_plan_joint``)."""
+_STALL_ITERATIONS = 5
+_STALL_REL = 1e-6
+"""A joint-space run stops at a feasible iterate once this many iterations in a row have
+lowered the objective by less than this share of it (:func:`_stalled`)."""
 _LEVEL_IK = IkOptions(position_tol_m=1e-8, axis_tol_rad=1e-6)  # a plan's roll turned, its camera held
 
 
@@ -214,7 +224,11 @@ class KinematicBvePlanner:
         # mapped to joint space by one pseudo-inverse step. After a view that measured
         # nothing, the current configuration is such a point of every term (the discounted
         # information is ~0 there, the failed views' cost at its peak): the two best seed
-        # directions instead.
+        # directions instead. A run from the current configuration that ends feasible and
+        # within a quarter step of the step limit has left that stationary point: the seed
+        # direction's run is then skipped (:data:`_LEFT_START`; measured on six episodes of
+        # three truss scenes: it found a better view in 4 of 63 such plans, 1% of the loss
+        # the second runs won in all 78).
         failed, self._left_failed = self._left_failed, False
         seeds = [] if failed else [self.q]
         candidates = c_now + 0.9 * step.step_m * SEED_DIRECTIONS
@@ -236,6 +250,7 @@ class KinematicBvePlanner:
                 res = minimize_slsqp(
                     f, q0, ineq=[(ineq, ineq_jac)], eq=[(eq, eq_jac)], bounds=bounds,
                     maxiter=self.settings.planner.max_iterations, ftol=1e-10, lazy=True,
+                    halt=_stalled(lambda q: verify(self.kin.clip(q))[0]),
                 )  # fmt: skip
             iterations += int(res.nit)
             q = self.kin.clip(res.x)
@@ -244,6 +259,8 @@ class KinematicBvePlanner:
                 value = f(q)[0]
                 if best is None or value < best[0]:
                     best = (value, q)
+                if q0 is self.q and np.linalg.norm(p - c_now) >= _LEFT_START * step.step_m:
+                    break
         if best is not None:
             q = self._level(best[1], k_hat, lambda q: verify(q)[0])
             p, _ = self.kin.camera_pose(q)
@@ -316,6 +333,24 @@ class KinematicBvePlanner:
         status: PlanStatus = "best_feasible" if ok else "restoring"
         return ViewPlan(p, k_hat, status, ok, max(0.0, worst), float("nan"),
                         iterations + int(res.nit), time.perf_counter() - t0, q.copy())  # fmt: skip
+
+
+def _stalled(feasible: Callable[[np.ndarray], bool]) -> Callable[[np.ndarray, float], bool]:
+    """A ``halt`` for one SLSQP run: stop at a ``feasible`` iterate once the last
+    :data:`_STALL_ITERATIONS` iterations lowered the objective by less than
+    :data:`_STALL_REL` of it. SLSQP's own test (ftol 1e-10, its constraints to 1e-9) lets a run
+    creep along the step limit to the iteration cap: measured in ``truss_cluster``, runs that
+    reached the cap moved the camera 5-32 mm from iteration 40 to 100 for 2e-4 to 5e-2 nats
+    of objective, at ~0.4 ms an iteration."""
+    values: list[float] = []
+
+    def halt(q: np.ndarray, value: float) -> bool:
+        values.append(value)
+        if len(values) <= _STALL_ITERATIONS:
+            return False
+        return values[-1 - _STALL_ITERATIONS] - value < _STALL_REL * max(1.0, abs(value)) and feasible(q)
+
+    return halt
 
 
 def make_arm_planner(
