@@ -295,7 +295,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
 
     def make() -> Any:
         q = world.q_measured if world.q_measured is not None else q0
-        return make_arm_planner(search, loss, names, kin, q, planner_rng)
+        return make_arm_planner(search, loss, names, kin, q, planner_rng, economical=True)
 
     fruit = s.fruit
     radius_prior = (fruit.radius_m, max(fruit.radius_m * fruit.radius_spread_rel / math.sqrt(3.0), 1e-5))
