@@ -46,15 +46,21 @@ def _near(
     return bool(np.any(np.all(np.abs(patch.astype(int) - colour) <= tol, axis=-1)))
 
 
-def test_tracks_are_drawn_where_they_project(monkeypatch: pytest.MonkeyPatch) -> None:
-    written: list[str] = []
+@pytest.fixture
+def written(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """Every text cv2.putText draws while the test runs (it still draws it)."""
+    texts: list[str] = []
     real = cv2.putText
 
     def put_text(img: np.ndarray, text: str, *args: Any, **kwargs: Any) -> Any:
-        written.append(text)
+        texts.append(text)
         return real(img, text, *args, **kwargs)
 
     monkeypatch.setattr(cv2, "putText", put_text)
+    return texts
+
+
+def test_tracks_are_drawn_where_they_project(written: list[str]) -> None:
     img = np.zeros((H, W, 3), np.uint8)
     tracks = [
         _state(0, [1.0, 0.0, 0.0], 0.02, True, True),  # centre of the image, 3σ = 30 px
@@ -76,15 +82,7 @@ def test_tracks_are_drawn_where_they_project(monkeypatch: pytest.MonkeyPatch) ->
     assert {"#0 pick 2", "#1", "#2 pick 1"} <= set(written)
 
 
-def test_detections_are_circled_and_tagged(monkeypatch: pytest.MonkeyPatch) -> None:
-    written: list[str] = []
-    real = cv2.putText
-
-    def put_text(img: np.ndarray, text: str, *args: Any, **kwargs: Any) -> Any:
-        written.append(text)
-        return real(img, text, *args, **kwargs)
-
-    monkeypatch.setattr(cv2, "putText", put_text)
+def test_detections_are_circled_and_tagged(written: list[str]) -> None:
     img = np.zeros((H, W, 3), np.uint8)
     marks = [
         Mark((200.0, 300.0), 40.0, "#3", LOCALISED),
@@ -132,21 +130,13 @@ def test_every_fruit_video_reads_back_and_leaves_the_episode_unchanged(tmp_path,
 
 
 def test_the_visit_panel_labels_the_fruit_just_picked_and_leaves_out_those_picked_before(
-    monkeypatch: pytest.MonkeyPatch,
+    monkeypatch: pytest.MonkeyPatch, written: list[str]
 ) -> None:
     from types import SimpleNamespace
 
     from bve_mj.config import Settings
     from bve_mj.loop.harvest import Visit
 
-    written: list[str] = []
-    real = cv2.putText
-
-    def put_text(img: np.ndarray, text: str, *args: Any, **kwargs: Any) -> Any:
-        written.append(text)
-        return real(img, text, *args, **kwargs)
-
-    monkeypatch.setattr(cv2, "putText", put_text)
     settings = Settings()
     cam = settings.camera
     # the camera at the origin looking along +x (R_world_camera = I: x optical, z up)
