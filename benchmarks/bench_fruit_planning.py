@@ -41,6 +41,8 @@ def main() -> None:
     args = ap.parse_args()
     if not 1 <= args.episodes <= 1000:
         ap.error("--episodes: an integer in [1, 1000]")
+    if args.seed < 0:
+        ap.error("--seed: an integer >= 0")
     try:
         suite = load_suite(only=args.scenario.split(","))
     except BveError as exc:

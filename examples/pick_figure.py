@@ -19,7 +19,6 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import cv2
 import mujoco
 import numpy as np
 
@@ -31,7 +30,7 @@ from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
 from bve_mj.loop.start import start_episode
 from bve_mj.perception.all_fruit import detect_all
 from bve_mj.perception.detection import Intrinsics
-from bve_mj.reporting.detector_panel import detector_panel, side_by_side
+from bve_mj.reporting.detector_panel import detector_panel, write_side_by_side
 from bve_mj.robot import IkOptions, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.mujoco_world import MujocoWorld
@@ -86,16 +85,13 @@ def main(seed: int = 9105, out_dir: str = "out") -> None:
             lines.append(f"  {title}: {verdict}")
     finally:
         world.close()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    small = side_by_side(panels)
-    cv2.imwrite(str(out / "pick.png"), small)
+    written = write_side_by_side(panels, Path(out_dir) / "pick.png")
     names = ", ".join(f.name for f in taken)
     print(f"truss_cluster episode seed {seed}: the survey localised {len(taken)} of {len(ripe)}: {names}")
     where = np.round(centres[k], 3).tolist()
     print(f"{ripe[k].name} at {where} m, seen from the aisle at {s.band_distance_m:.2f} m:")
     print("\n".join(lines))
-    print(f"wrote {out / 'pick.png'} (as it grows | front fruit picked)")
+    print(f"wrote {written} (as it grows | front fruit picked)")
 
 
 if __name__ == "__main__":

@@ -19,7 +19,6 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import cv2
 import mujoco
 import numpy as np
 
@@ -33,7 +32,7 @@ from bve_mj.perception.all_fruit import detect_all
 from bve_mj.perception.detection import Intrinsics
 from bve_mj.planning.constraints import build_constraints
 from bve_mj.planning.unhide import unhiding_positions
-from bve_mj.reporting.detector_panel import detector_panel, side_by_side
+from bve_mj.reporting.detector_panel import detector_panel, write_side_by_side
 from bve_mj.robot import IkOptions, look_at_ik
 from bve_mj.sim.arm import CAMERA_NAME
 from bve_mj.sim.mujoco_world import declared_noise
@@ -98,13 +97,10 @@ def main(seed: int = 3669142227, out_dir: str = "out") -> None:
             lines.append(f"  {title}: camera {where} m, outline predicted {predicted:.0f} deg; {verdict}")
     finally:
         renderer.close()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    small = side_by_side(panels)
-    cv2.imwrite(str(out / "unhide.png"), small)
+    written = write_side_by_side(panels, Path(out_dir) / "unhide.png")
     print(f"truss_cluster episode seed {seed}: {ripe[k].name} at {np.round(centres[k], 3).tolist()} m")
     print("\n".join(lines))
-    print(f"wrote {out / 'unhide.png'} (aisle | unhiding)")
+    print(f"wrote {written} (aisle | unhiding)")
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@ fruit, the fruit the every-fruit detector measured, and what it made of one frui
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -14,7 +15,7 @@ from bve_mj.perception.all_fruit import FruitDetections
 from bve_mj.perception.detection import Intrinsics
 from bve_mj.sim.scene_model import Fruit
 
-__all__ = ["detector_panel", "side_by_side"]
+__all__ = ["detector_panel", "side_by_side", "write_side_by_side"]
 
 _WHITE, _GREEN, _MAGENTA = (255, 255, 255), (0, 255, 0), (255, 0, 255)  # BGR
 
@@ -66,3 +67,12 @@ def side_by_side(panels: Sequence[np.ndarray], scale: float = 0.75) -> np.ndarra
     for panel in panels[1:]:
         row += [gap, panel]
     return cv2.resize(np.hstack(row), None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+
+
+def write_side_by_side(panels: Sequence[np.ndarray], path: str | Path) -> Path:
+    """:func:`side_by_side` of ``panels`` written to ``path`` (its folder made); the path."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(out), side_by_side(panels)):
+        raise OSError(f"could not write {out}")
+    return out
