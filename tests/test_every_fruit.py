@@ -293,8 +293,8 @@ def test_a_visit_path_is_checked_against_every_track_sphere_on_the_way_not_only_
     is found though both ends are clear of it; far away it is not."""
     import mujoco
 
-    from bve_mj.loop.arm_clearance import path_clearance
     from bve_mj.sim.arm import CAMERA_NAME
+    from bve_mj.sim.arm_boxes import path_clearance
 
     world, q0 = _arm_world()
     m, data, adr = world.model, world.data, world.qpos_adr
@@ -305,11 +305,18 @@ def test_a_visit_path_is_checked_against_every_track_sphere_on_the_way_not_only_
     mujoco.mj_camlight(m, data)
     halfway = data.cam_xpos[m.camera(CAMERA_NAME).id].copy()
     data.qpos[adr] = q0
+    qpos = data.qpos.copy()
     sphere = np.array([[*halfway, 0.02]])
     assert path_clearance(world, q0, q1, sphere) < 0.0
     assert path_clearance(world, q0, q0, sphere) > 0.0 and path_clearance(world, q1, q1, sphere) > 0.0
     far = np.array([[*(halfway + [0.0, 0.0, 2.0]), 0.02]])
     assert path_clearance(world, q0, q1, far) > 1.0
+    # the arm is posed in a scratch MjData kept per model: the world's own is left alone,
+    # and an answer is the same after other moves were measured as it was the first time
+    first = path_clearance(world, q0, q1, sphere)
+    path_clearance(world, q1, q1 + 0.3, far, 0.1, hand=False)
+    assert path_clearance(world, q0, q1, sphere) == first
+    np.testing.assert_array_equal(data.qpos, qpos)
 
 
 def _arm_world(seed: int = 1):  # the arm in its start scene, as path_clearance reads a world
@@ -331,13 +338,13 @@ def _deepest_x(world, q, hand: bool) -> float:
     """The farthest x of the hand's geoms (the last joint's link), or of the rest of the arm's."""
     import mujoco
 
-    from bve_mj.loop.arm_clearance import _arm_geoms, _box_max_x
+    from bve_mj.sim.arm_boxes import _box_max_x, arm_geoms
 
     world.data.qpos[world.qpos_adr] = q
     mujoco.mj_kinematics(world.model, world.data)
     m, names = world.model, world.kin.joint_names
-    ends = set(_arm_geoms(m, names[-1:]))
-    return max(_box_max_x(m, world.data, g) for g in _arm_geoms(m, names) if (g in ends) == hand)
+    ends = set(arm_geoms(m, names[-1:]))
+    return max(_box_max_x(m, world.data, g) for g in arm_geoms(m, names) if (g in ends) == hand)
 
 
 def test_the_canopy_keeps_the_arm_in_front_and_lets_only_the_hand_in():
@@ -346,7 +353,7 @@ def test_the_canopy_keeps_the_arm_in_front_and_lets_only_the_hand_in():
     ``hand=False`` (the approach) the last link (flange and camera) may enter it, the rest
     of the arm may not; a move that starts behind the plane (the last view's pose) may come
     out, or stay, but not go deeper."""
-    from bve_mj.loop.arm_clearance import path_clearance
+    from bve_mj.sim.arm_boxes import path_clearance
 
     world, q0 = _arm_world()
     none = np.zeros((0, 4))
@@ -372,7 +379,7 @@ def test_a_move_leaving_a_sphere_the_arm_is_in_is_measured_against_the_others_on
     """``leaving`` (a retreat's check): a geom inside a sphere at the start is not measured
     against it, so a move that takes it deeper there but nowhere else passes; a sphere the
     arm starts clear of still counts."""
-    from bve_mj.loop.arm_clearance import path_clearance
+    from bve_mj.sim.arm_boxes import path_clearance
 
     world, q0 = _arm_world()
     p0, R0 = world.kin.camera_pose(q0)
@@ -456,8 +463,9 @@ def test_baselines_take_only_views_whose_moves_keep_clear():
     clear of a canopy 5 mm in front of the arm, and its plans carry the pose checked (the
     camera there); without it the same baseline moves into the canopy."""
     from bve_mj.config.experiments import EXPERIMENTS
-    from bve_mj.loop.arm_clearance import BaselineClearance, Obstacles, deepest_x, path_clearance
+    from bve_mj.loop.arm_clearance import BaselineClearance, Obstacles
     from bve_mj.robot import make_arm_planner
+    from bve_mj.sim.arm_boxes import deepest_x, path_clearance
 
     world, q0 = _arm_world()
     world.q = q0

@@ -14,10 +14,10 @@ loop's moves (:class:`ClearMovesPlanner`).
   fruit, less ``CANOPY_MARGIN_M``. The fruit the detector never measured (green ones, other
   trusses) hang there too, so an arm that stays in front of it touches none of them.
 
-:func:`path_clearance` measures a joint-space move (the controller's straight path, sampled)
-against them, each arm geom taken as its box. :class:`FruitClearance` measures, in physics,
-the least distance between the arm's geoms and every true fruit (MuJoCo's
-``mj_geomDistance``): a move touches a fruit when it falls to zero.
+:func:`~bve_mj.sim.arm_boxes.path_clearance` measures a joint-space move (the controller's
+straight path, sampled) against them, each arm geom taken as its box. :class:`FruitClearance`
+measures, in physics, the least distance between the arm's geoms and every true fruit
+(MuJoCo's ``mj_geomDistance``): a move touches a fruit when it falls to zero.
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from bve_mj.estimation.belief import Belief
 from bve_mj.planning.constraints import Constraint
 from bve_mj.planning.plan import Planner, PlannerAround, ViewPlan
 from bve_mj.robot.ik import IkOptions, look_at_ik
+from bve_mj.sim.arm_boxes import arm_geoms, path_clearance
 from bve_mj.sim.mujoco_world import MujocoWorld
 from bve_mj.sim.scene_model import SceneInfo, fruit_geom_name
 
@@ -47,8 +48,6 @@ __all__ = [
     "FruitClearance",
     "KnownFruit",
     "Obstacles",
-    "deepest_x",
-    "path_clearance",
     "retreat_view",
 ]
 
@@ -60,7 +59,6 @@ CANOPY_MARGIN_M = 0.03
 """The canopy's front lies this far in front of the known fruit's median front [m] (a round
 tomato's radius): the trusses of one row hang at depths a few centimetres apart."""
 
-_PATH_SAMPLES = 16  # configurations checked along a joint-space move
 _CHECK_EVERY = 10  # physics steps between clearance checks
 
 
@@ -130,88 +128,6 @@ class Obstacles:
         return self.spheres[[i != track for i in self.ids]].reshape(-1, 4)
 
 
-def deepest_x(world: MujocoWorld, q: np.ndarray) -> float:
-    """The farthest x any of the arm's geoms (its box) reaches at q [m]."""
-    m = world.model
-    data = mujoco.MjData(m)
-    data.qpos[:] = world.data.qpos
-    data.qpos[world.qpos_adr] = q
-    mujoco.mj_kinematics(m, data)
-    return max(_box_max_x(m, data, g) for g in _arm_geoms(m, world.kin.joint_names))
-
-
-def _box_half(m: mujoco.MjModel, g: int) -> np.ndarray:
-    """A geom's half sizes as a box (a cylinder as the box around it)."""
-    half = m.geom_size[g]
-    if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CYLINDER:
-        return np.array([half[0], half[0], half[1]])
-    return np.asarray(half)
-
-
-def _box_max_x(m: mujoco.MjModel, data: mujoco.MjData, g: int) -> float:
-    """The farthest x of a geom's box [m]."""
-    return float(data.geom_xpos[g][0] + np.abs(data.geom_xmat[g].reshape(3, 3)[0]) @ _box_half(m, g))
-
-
-def path_clearance(
-    world: MujocoWorld,
-    q_from: np.ndarray,
-    q_to: np.ndarray,
-    spheres: np.ndarray,
-    canopy_x_m: float = math.inf,
-    hand: bool = True,
-    leaving: bool = False,
-) -> float:
-    """The least distance between the arm's geoms and the ``spheres`` (n, 4: centre, radius)
-    or the canopy's front over the straight joint-space path ``q_from`` → ``q_to`` (sampled),
-    each arm geom taken as its box (a cylinder as the box around it) [m]; negative: inside.
-
-    The canopy's front is the plane x = ``canopy_x_m``; ``hand`` False: the last joint's link
-    (flange and camera) may enter it (the approach). A move that starts inside (the last
-    view's pose may be) is measured against its way out: a geom inside a sphere or behind
-    the canopy's front at ``q_from`` may not go deeper than it starts. ``leaving``: a move
-    out of an arm tangled with the spheres (:func:`retreat_view`): a geom inside a sphere at
-    ``q_from`` is not measured against that sphere at all (it is leaving it); every other
-    geom and sphere, and the canopy, as above."""
-    if len(spheres) == 0 and not math.isfinite(canopy_x_m):
-        return math.inf
-    m = world.model
-    data = mujoco.MjData(m)
-    data.qpos[:] = world.data.qpos
-    arm = np.array(_arm_geoms(m, world.kin.joint_names))
-    half = np.array([_box_half(m, g) for g in arm])  # (k, 3)
-    hand_geoms = set(_arm_geoms(m, world.kin.joint_names[-1:]))
-    in_canopy = np.array([hand or g not in hand_geoms for g in arm.tolist()])
-    inside = None  # each geom's depth into each sphere at q_from (≤ 0), (k, n)
-    behind = None  # each geom's depth behind the canopy's front at q_from (≥ 0), (k,)
-    least = math.inf
-    for s in np.linspace(0.0, 1.0, _PATH_SAMPLES):
-        data.qpos[world.qpos_adr] = q_from + s * (np.asarray(q_to) - q_from)
-        mujoco.mj_kinematics(m, data)
-        pos, R = data.geom_xpos[arm], data.geom_xmat[arm].reshape(-1, 3, 3)
-        if len(spheres):
-            # the spheres' centres in each geom's frame, (k, n, 3); the gap to each box
-            local = np.einsum("knj,kji->kni", spheres[None, :, :3] - pos[:, None, :], R)
-            outside = local - np.clip(local, -half[:, None, :], half[:, None, :])
-            gap = np.linalg.norm(outside, axis=2) - spheres[None, :, 3]
-            if inside is None:
-                inside = np.minimum(gap, 0.0)
-                if leaving:
-                    inside = np.where(inside < 0.0, -np.inf, 0.0)
-            least = min(least, float(np.min(gap - inside)))
-        if math.isfinite(canopy_x_m) and in_canopy.any():
-            gap_x = canopy_x_m - (pos[:, 0] + np.einsum("ki,ki->k", np.abs(R[:, 0, :]), half))  # farthest x
-            behind = np.maximum(-gap_x, 0.0) if behind is None else behind
-            least = min(least, float(np.min((gap_x + behind)[in_canopy])))
-    return least
-
-
-def _arm_geoms(m: mujoco.MjModel, joint_names: Sequence[str]) -> list[int]:
-    """Every geom of the arm's bodies and their descendants."""
-    arm_bodies = {m.jnt_bodyid[m.joint(n).id] for n in joint_names}
-    return [g for g in range(m.ngeom) if _root_in(m, int(m.geom_bodyid[g]), arm_bodies)]
-
-
 class FruitClearance:
     """The least distance between the arm's geoms and every true fruit's geom [m] (at most
     0.05 m is measured), measured every few physics steps of a move (call :meth:`step` from
@@ -224,7 +140,7 @@ class FruitClearance:
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, fruit_geom_name(f.name)) for f in info.fruits
         ]
         self.fruit = [g for g in self.fruit if g >= 0]
-        self.arm = _arm_geoms(m, world.kin.joint_names)
+        self.arm = arm_geoms(m, world.kin.joint_names)
         self.least_m = math.inf
         self._n = 0
 
@@ -237,15 +153,6 @@ class FruitClearance:
             for f in self.fruit:
                 dist = mujoco.mj_geomDistance(m, d, a, f, 0.05, None)
                 self.least_m = min(self.least_m, float(dist))
-
-
-def _root_in(m: mujoco.MjModel, body: int, arm: set[int]) -> bool:
-    """Whether ``body`` is an arm body or a descendant of one."""
-    while body > 0:
-        if body in arm:
-            return True
-        body = int(m.body_parentid[body])
-    return False
 
 
 @dataclass(frozen=True)

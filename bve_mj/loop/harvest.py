@@ -47,11 +47,11 @@ from bve_mj.loop.arm_clearance import (
     PATH_CLEARANCE_M,
     FruitClearance,
     Obstacles,
-    deepest_x,
 )
 from bve_mj.loop.fruit_records import FruitState
 from bve_mj.planning.plan import ViewPlan
 from bve_mj.robot.ik import IkOptions, look_at_ik
+from bve_mj.sim.arm_boxes import deepest_x
 from bve_mj.sim.mujoco_world import MujocoWorld
 from bve_mj.sim.scene_model import SceneInfo
 

@@ -147,7 +147,7 @@ class EveryFruitPlanner:
             (n,) bool: the fruit the view would see.
         candidates: how many of the least localised fruit get a planned viewpoint.
         clear: ``clear(plan)``: whether the move to a planned view keeps the arm clear of what
-            the robot knows (the world's check, :func:`bve_mj.loop.arm_clearance.path_clearance`);
+            the robot knows (the world's check, :func:`bve_mj.sim.arm_boxes.path_clearance`);
             a candidate whose move is not clear is left out as one whose planner failed, an
             exploring view likewise. None: not checked.
         unhide: ``unhide(fruit, fruits, p_world_camera, q)``: a view from which ``fruit`` would
