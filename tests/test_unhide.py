@@ -168,6 +168,9 @@ def test_the_arm_reaches_the_unhiding_view_looking_at_the_hidden_fruit():
     assert _arc(centres, radii, p, R)[1] >= MIN_ARC
     with pytest.raises(ValueError, match="not among"):
         unhide(_target(7, back, 0.02), fruits, camera, q)
+    for bad in (-1, 1.5, True):
+        with pytest.raises(ValueError, match="ik_restarts"):
+            ArmUnhider(s, names, kin, _outline, MIN_ARC, rng, True, q, ik_restarts=bad)
 
 
 @pytest.mark.parametrize("bad", [1, "true", None])

@@ -37,6 +37,13 @@ class ArmUnhider:
         q_start: the arm's joint angles at the start. Each call's ``q`` (the encoders' last
             reading) replaces them; a call without one (after a move whose IK failed) starts
             from the last given, as the BVE's own planners do.
+        ik_restarts: random restarts of the look-at IK where the start from ``q`` fails. None
+            by default: in 9 every-fruit episodes of three truss scenes (seed 9292), 24 of the
+            25 views found came from the start at ``q``, and two restarts a position were two
+            thirds of the time the IK spent on positions it could not reach (~12 ms each);
+            a restart's answer is also a far reconfiguration of the arm. The start from ``q``
+            runs at most 40 iterations, as a plan's does (those 25 took at most 20; a position
+            out of reach ran all 100).
     """
 
     settings: Settings
@@ -48,8 +55,15 @@ class ArmUnhider:
     upright: bool
     q_start: np.ndarray
     options: UnhideOptions = field(default_factory=UnhideOptions)
+    ik_restarts: int = 0
 
     def __post_init__(self) -> None:
+        if (
+            isinstance(self.ik_restarts, bool)
+            or not isinstance(self.ik_restarts, int)
+            or self.ik_restarts < 0
+        ):
+            raise ValueError(f"ArmUnhider.ik_restarts must be an integer >= 0, got {self.ik_restarts!r}")
         self._q = np.asarray(self.q_start, dtype=float).copy()
 
     def __call__(
@@ -74,7 +88,7 @@ class ArmUnhider:
         if q is not None:
             self._q = np.asarray(q, dtype=float).copy()
         q_now = self._q
-        ik_options = IkOptions(restarts=2, upright=self.upright)
+        ik_options = IkOptions(restarts=self.ik_restarts, max_iterations=40, upright=self.upright)
         for p, _ in ranked:
             ik = look_at_ik(self.kin, p, k_hat, q_now, self.rng, ik_options)
             if ik.success:
