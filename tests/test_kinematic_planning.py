@@ -188,7 +188,7 @@ def test_planned_views_are_upright_where_the_arm_allows():
     assert np.median(rolls[0.0]) > math.radians(60.0)
 
 
-def test_a_joint_space_run_halts_once_its_objective_stalls_at_a_feasible_iterate():
+def test_a_joint_space_run_halts_where_its_objective_stalls_feasible_or_sticks_infeasible():
     from bve_mj.robot.planner import _STALL_ITERATIONS, _stalled
 
     q = np.zeros(6)
@@ -197,8 +197,11 @@ def test_a_joint_space_run_halts_once_its_objective_stalls_at_a_feasible_iterate
     flat = _stalled(lambda q: True)
     halts = [flat(q, -50.0 - 1e-6 * k) for k in range(_STALL_ITERATIONS + 2)]
     assert halts == [False] * _STALL_ITERATIONS + [True, True]  # after the window of iterations
-    infeasible = _stalled(lambda q: False)
-    assert not any(infeasible(q, -50.0) for _ in range(30))  # never at an infeasible iterate
+    creeping = _stalled(lambda q: False)  # infeasible, still moving a little: never
+    assert not any(creeping(q, -50.0 - 1e-6 * k) for k in range(30))
+    stuck = _stalled(lambda q: False)  # infeasible, the same point iteration after iteration
+    halts = [stuck(q, -50.0) for _ in range(_STALL_ITERATIONS + 2)]
+    assert halts == [False] * _STALL_ITERATIONS + [True, True]
 
 
 @pytest.mark.parametrize("economical", [True, False])

@@ -56,9 +56,8 @@ _LEFT_START = 0.75
 """``economical``: a run from the current configuration that moves the camera this share of
 the step limit or more has left the view just taken: no second start (``_plan_joint``)."""
 _STALL_ITERATIONS = 5
-_STALL_REL = 1e-6
-"""A joint-space run stops at a feasible iterate once this many iterations in a row have
-lowered the objective by less than this share of it (:func:`_stalled`)."""
+_STALL_REL = 1e-6  # a run stops once _STALL_ITERATIONS lowered f by less than this share of it
+_STUCK_REL = 1e-9  # ... at an infeasible iterate: changed it by less than this (:func:`_stalled`)
 _LEVEL_IK = IkOptions(position_tol_m=1e-8, axis_tol_rad=1e-6)  # a plan's roll turned, its camera held
 
 
@@ -226,16 +225,13 @@ class KinematicBvePlanner:
             return ok, axis_err, p
 
         # Seeds: the current configuration (often a stationary point of the loss: the view
-        # just taken) and the best-scoring feasible point of the BVE's seed directions,
-        # mapped to joint space by one pseudo-inverse step. After a view that measured
-        # nothing, the current configuration is such a point of every term (the discounted
-        # information is ~0 there, the failed views' cost at its peak): the two best seed
-        # directions instead. ``economical``: a run from the current configuration that ends
-        # feasible and within a quarter step of the step limit has left that stationary
-        # point, and the seed direction's run is skipped (:data:`_LEFT_START`; measured on six
-        # episodes of three truss scenes: it found a better view in 4 of 63 such plans, 1% of
-        # the loss the second runs won in all 78). After a failed view both directions run:
-        # the second did better in 39 of 77 plans whose first had gone a whole step.
+        # just taken) and the best feasible seed direction, mapped to joint space by one
+        # pseudo-inverse step; after a view that measured nothing (the current configuration
+        # is then a stationary point of every term) the two best seed directions.
+        # ``economical``: a run from the current configuration that ends feasible within a
+        # quarter step of the step limit has left that point: no seed direction's run
+        # (:data:`_LEFT_START`; six truss episodes: it did better in 4 of 63 such plans).
+        # After a failed view both directions run (the second did better in 39 of 77).
         failed, self._left_failed = self._left_failed, False
         seeds = [] if failed else [self.q]
         candidates = c_now + 0.9 * step.step_m * SEED_DIRECTIONS
@@ -349,14 +345,20 @@ def _stalled(feasible: Callable[[np.ndarray], bool]) -> Callable[[np.ndarray, fl
     :data:`_STALL_REL` of it. SLSQP's own test (ftol 1e-10, its constraints to 1e-9) lets a run
     creep along the step limit to the iteration cap: measured in ``truss_cluster``, runs that
     reached the cap moved the camera 5-32 mm from iteration 40 to 100 for 2e-4 to 5e-2 nats
-    of objective, at ~0.4 ms an iteration."""
+    of objective, at ~0.4 ms an iteration. A run stuck at an infeasible point (the
+    objective the same to :data:`_STUCK_REL` of it for those iterations: its line search
+    failing there) is stopped too: in ``cherry_truss`` and ``truss_cluster`` (seed 9191)
+    such runs held the point to the iteration cap, none becoming feasible after."""
     values: list[float] = []
 
     def halt(q: np.ndarray, value: float) -> bool:
         values.append(value)
         if len(values) <= _STALL_ITERATIONS:
             return False
-        return values[-1 - _STALL_ITERATIONS] - value < _STALL_REL * max(1.0, abs(value)) and feasible(q)
+        scale, lowered = max(1.0, abs(value)), values[-1 - _STALL_ITERATIONS] - value
+        if lowered >= _STALL_REL * scale:
+            return False
+        return feasible(q) or abs(lowered) < _STUCK_REL * scale
 
     return halt
 
