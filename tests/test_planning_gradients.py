@@ -63,10 +63,10 @@ def test_information_derivative(name, rng):
         np.testing.assert_allclose(dL, fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
 
 
-def _check_term(term, c):
+def _check_term(term, c, h=1e-6):
     value, grad = term.value_and_gradient(c)
     assert value == pytest.approx(term.value(c), rel=1e-12, abs=1e-15)
-    fd = finite_difference(term.value, c, h=1e-6)
+    fd = finite_difference(term.value, c, h=h)
     np.testing.assert_allclose(grad, fd, rtol=1e-4, atol=1e-7 * max(1.0, np.abs(fd).max()))
 
 
@@ -231,7 +231,9 @@ def test_centre_block_losses_gradients(name, dim, rng):
     for _ in range(20):
         c, x = random_state_pair(rng, dim)
         Lo = np.linalg.inv(random_spd_n(rng, dim))
-        _check_term(DispersionLoss(SIZE_INFOS[name], x, Lo), c)
+        # steps of 1e-5: M's condition reaches 1e6 in these draws, the value's rounding
+        # ~1e-12, which differences over 1e-6 would turn into 1e-6 of noise
+        _check_term(DispersionLoss(SIZE_INFOS[name], x, Lo), c, h=1e-5)
         for tau in (0.0, 0.5):
             loss = MaxEigenvalueLoss(SIZE_INFOS[name], x, Lo, tau)
             M = SIZE_INFOS[name].information(c, x) + Lo
@@ -278,3 +280,50 @@ def test_lazy_objective_is_the_eager_one_bit_for_bit(dim, rng):
                     value, gradient = objective.lazy(c)
                     ref_value, ref_gradient = objective.value_and_gradient(c)
                     assert _same(value, ref_value) and _same(gradient(), ref_gradient), name
+
+
+@pytest.mark.parametrize("bearing", [True, False])
+@pytest.mark.parametrize("failed", [False, True])
+@pytest.mark.parametrize("taken", [False, True])
+def test_the_fused_dispersion_is_the_composed_one(bearing, failed, taken, rng):
+    """:meth:`SizeInformation.dispersion_lazy` (one pass of floats, what the planner runs)
+    against the loss composed from :meth:`information_lazy` (and the failed views' discount,
+    and the views already taken), value and gradient, in every branch; and at the skin, where
+    the apparent size is clipped, against finite differences of its own value."""
+    from bve_mj.estimation.view_correlation import ViewCorrelation
+    from bve_mj.planning.information import information_lazy
+    from bve_mj.planning.losses import _dispersion
+
+    corr = (ViewCorrelation(0.5, 0.03), ViewCorrelation(0.3, 0.05))
+    for i in range(40):
+        c, x = random_state_pair(rng, 4)
+        e = (c - x[:3]) / np.linalg.norm(c - x[:3])
+        near = [e + rng.normal(0.0, 0.2, 3) for _ in range(3)]
+        directions = np.array([d / np.linalg.norm(d) for d in near])
+        info = SizeInformation((2e-7, 1e-9), (1e-7, 2e-9), bearing, directions if taken else None, corr)
+        if failed:
+            info = FailedViewDiscount(info, directions[:2], math.radians(25.0))
+        Lo = np.linalg.inv(random_spd_n(rng, 4))
+        loss = DispersionLoss(info, x, Lo)
+        assert loss._fused is not None  # the fast path is the one taken
+        value, gradient = loss.lazy(c)
+        L, dL = information_lazy(info, c, x)
+        expected, d_expected = _dispersion(L + Lo)
+        assert value == pytest.approx(expected, rel=1e-11)
+        np.testing.assert_allclose(
+            gradient(), d_expected(dL()), rtol=1e-6, atol=1e-9 * np.abs(d_expected(dL())).max()
+        )
+        if i < 5:  # the camera at the fruit's skin: r/ρ > 0.99, the apparent size held
+            skin = x[:3] + 0.995 * x[3] * e
+            L, dL = information_lazy(info, skin, x)
+            fd = finite_difference(lambda cc, info=info, x=x: information_lazy(info, cc, x)[0], skin, h=1e-8)
+            np.testing.assert_allclose(dL(), fd, rtol=1e-4, atol=1e-5 * np.abs(fd).max())
+            value, gradient = loss.lazy(skin)
+            expected, d_expected = _dispersion(L + Lo)  # M's condition 1e8-1e10 at 1 cm
+            assert value == pytest.approx(expected, rel=1e-7)
+            np.testing.assert_allclose(
+                gradient(), d_expected(dL()), rtol=1e-4, atol=1e-5 * np.abs(d_expected(dL())).max()
+            )
+    # a state with biases takes the composed path
+    x7 = np.concatenate([x, [0.0, 0.0, 0.0]])
+    assert DispersionLoss(SIZE_INFOS["bearing_size"], x7, np.linalg.inv(random_spd_n(rng, 7)))._fused is None

@@ -30,13 +30,12 @@ goes flat; the loss then also counts the failed views near c
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
-import bve_mj.linalg as la
 from bve_mj.config import Settings
 from bve_mj.geometry import (
     camera_frame,
@@ -52,7 +51,8 @@ __all__ = [
     "FailedViewDiscount",
     "ObservationInformation",
     "RangeInformation",
-    "failed_view_kernel",
+    "failed_view_floats",
+    "failed_view_rows",
     "information_lazy",
     "observation_information",
 ]
@@ -159,21 +159,32 @@ class RangeInformation:
         return _pad(np.outer(e, e) / self.variance_m2, None, n)[0], derivative
 
 
-def failed_view_kernel(
-    failed: np.ndarray, c: np.ndarray, k_hat: np.ndarray, width_rad: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def failed_view_floats(
+    rows: Sequence[tuple[float, float, float]], c: np.ndarray, k_hat: np.ndarray, width_rad: float
+) -> tuple[tuple[float, float, float], float, list[float], list[float]]:
     """How near the camera at c is to each failed view, seen from the estimate ``k_hat``:
-    g_j(c) = exp(-(1 - e(c)·d_j)/w) (k,), g_j/w (k,) and ∂(e(c)·d_j)/∂c (k, 3), so that
-    ∂g_j/∂c = (g_j/w)·∂(e·d_j)/∂c (e(c) the unit direction k̂ → c, d_j the rows of
-    ``failed``, w = 1 - cos ``width_rad``)."""
-    d = np.asarray(c, dtype=float) - k_hat
-    r = la.norm(d)
-    e = d / r
+    e(c) (3 floats, the unit direction k̂ → c), r = ‖c - k̂‖, e·d_j and g_j(c) = exp(-(1 -
+    e·d_j)/w) for the failed views' unit directions d_j (``rows``), w = 1 - cos ``width_rad``
+    (∂(e·d_j)/∂c = (d_j - (e·d_j) e)/r). In floats: a handful of failed views is a few
+    dozen float operations, several times faster than the same on (k, 3) arrays.
+
+    Raises:
+        ValueError: where c is the estimate (no direction)."""
+    k0, k1, k2 = np.asarray(k_hat, dtype=float)[:3].tolist()
+    c0, c1, c2 = np.asarray(c, dtype=float).tolist()
+    d0, d1, d2 = c0 - k0, c1 - k1, c2 - k2
+    r = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if r == 0.0:
+        raise ValueError("the camera is at the estimate: no direction to weigh failed views by")
+    e0, e1, e2 = d0 / r, d1 / r, d2 / r
     w = 1.0 - math.cos(width_rad)
-    cos = failed @ e
-    g = np.exp(-(1.0 - cos) / w)
-    # ∂(e·d_j)/∂c = (I - e eᵀ) d_j / r
-    return g, g / w, (failed - np.outer(cos, e)) / r
+    cos = [a * e0 + b * e1 + z * e2 for a, b, z in rows]
+    return (e0, e1, e2), r, cos, [math.exp(-(1.0 - cj) / w) for cj in cos]
+
+
+def failed_view_rows(failed: np.ndarray) -> tuple[tuple[float, float, float], ...]:
+    """The failed views' unit directions (k, 3) as rows of floats (:func:`failed_view_floats`)."""
+    return tuple((a, b, z) for a, b, z in np.asarray(failed, dtype=float).reshape(-1, 3).tolist())
 
 
 @dataclass(frozen=True)
@@ -186,18 +197,43 @@ class FailedViewDiscount:
     failed: np.ndarray
     width_rad: float
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_rows", failed_view_rows(self.failed))
+
     def odds(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[float, np.ndarray]:
         """p(c) and ∂p/∂c (3,)."""
-        g, rate, dcos = failed_view_kernel(self.failed, c, x_hat[:3], self.width_rad)
-        q, dq = 1.0 - g, rate[:, None] * -dcos  # ∂q_j/∂c = -∂g_j/∂c
-        p = float(np.prod(q))
-        # Π_{i≠j} q_i for every j: the products before j times those after it (no division:
-        # a q_j of 0 is exact there)
-        if len(q) == 0:
-            return p, np.zeros(3)
-        before = np.cumprod(np.r_[1.0, q[:-1]])
-        after = np.cumprod(np.r_[1.0, q[:0:-1]])[::-1]
-        return p, (before * after) @ dq
+        p, dp = self.odds_lazy(c, x_hat)
+        return p, dp()
+
+    def odds_lazy(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[float, Callable[[], np.ndarray]]:
+        """p(c), and a function that computes ∂p/∂c (3,) (in floats: :func:`failed_view_floats`).
+
+        Raises:
+            ValueError: where c is the estimate (no direction)."""
+        rows: tuple[tuple[float, float, float], ...] = self._rows  # type: ignore[attr-defined]
+        (e0, e1, e2), r, cos, g = failed_view_floats(rows, c, x_hat, self.width_rad)
+        w = 1.0 - math.cos(self.width_rad)
+        p = 1.0
+        for gj in g:
+            p *= 1.0 - gj
+
+        def gradient() -> np.ndarray:
+            # Σ_j Π_{i≠j}(1 - g_i)·(-g_j/w)·∂(e·d_j)/∂c, ∂(e·d_j)/∂c = (d_j - (e·d_j) e)/r; the
+            # products Π_{i≠j} as those before j times those after it (no division: a
+            # factor of 0 is exact there)
+            after = [1.0] * len(g)
+            for j in range(len(g) - 2, -1, -1):
+                after[j] = after[j + 1] * (1.0 - g[j + 1])
+            before, out0, out1, out2 = 1.0, 0.0, 0.0, 0.0
+            for (a, b, z), cj, gj, aj in zip(rows, cos, g, after, strict=True):
+                f = before * aj * -gj / w / r
+                out0 += f * (a - cj * e0)
+                out1 += f * (b - cj * e1)
+                out2 += f * (z - cj * e2)
+                before *= 1.0 - gj
+            return np.array([out0, out1, out2])
+
+        return p, gradient
 
     def information(self, c: np.ndarray, x_hat: np.ndarray) -> np.ndarray:
         return self.odds(c, x_hat)[0] * self.base.information(c, x_hat)
@@ -210,8 +246,8 @@ class FailedViewDiscount:
     def information_lazy(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[np.ndarray, Derivative]:
         """:meth:`information_derivative` with ∂Λn/∂c computed when asked (same bits)."""
         L, dL = information_lazy(self.base, c, x_hat)
-        p, dp = self.odds(c, x_hat)
-        return p * L, lambda: p * dL() + L[:, :, None] * dp[None, None, :]
+        p, dp = self.odds_lazy(c, x_hat)
+        return p * L, lambda: p * dL() + L[:, :, None] * dp()[None, None, :]
 
 
 def observation_information(settings: Settings) -> ObservationInformation:

@@ -23,7 +23,14 @@ from typing import Protocol
 import numpy as np
 
 import bve_mj.linalg as la
-from bve_mj.planning.information import ObservationInformation, failed_view_kernel, information_lazy
+from bve_mj.planning.information import (
+    FailedViewDiscount,
+    ObservationInformation,
+    failed_view_floats,
+    failed_view_rows,
+    information_lazy,
+)
+from bve_mj.planning.size_information import SizeInformation
 
 __all__ = [
     "ApproachTerm",
@@ -134,13 +141,33 @@ def max_eigenvalue(M: np.ndarray, dM: np.ndarray, trace_weight: float) -> tuple[
 class DispersionLoss:
     """ln det of the centre's fused covariance: -ln det(Λn(c) + Λo) for a centre-only state
     (eq. 10); for a larger state, ln det([M⁻¹]_cc) = -ln det M + ln det M_bb (Schur
-    complement; M = Λn(c) + Λo, bb the radius and biases)."""
+    complement; M = Λn(c) + Λo, bb the radius and biases).
+
+    For the radius-in-state model (:class:`~bve_mj.planning.size_information.SizeInformation`,
+    failed views discounted or not) over a state of 4, the value and gradient come from
+    :meth:`~bve_mj.planning.size_information.SizeInformation.dispersion_lazy` (one pass of
+    floats, the same function to rounding); every other model composes Λn and its derivative."""
 
     info: ObservationInformation
     x_hat: np.ndarray
     prior_precision: np.ndarray
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_fused", _fused_dispersion(self.info, self.x_hat, self.prior_precision))
+
+    def _lazy(self, c: np.ndarray) -> tuple[float, Gradient] | None:
+        fused: Callable[[np.ndarray], tuple[float, Gradient]] | None = self._fused  # type: ignore[attr-defined]
+        if fused is None:
+            return None
+        try:
+            return fused(c)
+        except ValueError:  # M not positive definite, the camera at the estimate: the general path
+            return None
+
     def value(self, c: np.ndarray) -> float:
+        fast = self._lazy(c)
+        if fast is not None:
+            return fast[0]
         M = self.info.information(c, self.x_hat) + self.prior_precision
         Mb = _nuisance(M)
         return -float(la.slogdet(M)[1]) + (0.0 if Mb is None else float(la.slogdet(Mb)[1]))
@@ -149,13 +176,37 @@ class DispersionLoss:
         return self.value_and_gradient(c)[1]
 
     def value_and_gradient(self, c: np.ndarray) -> tuple[float, np.ndarray]:
+        fast = self._lazy(c)
+        if fast is not None:
+            return fast[0], fast[1]()
         L, dL = self.info.information_derivative(c, self.x_hat)
         return dispersion(L + self.prior_precision, dL)
 
     def lazy(self, c: np.ndarray) -> tuple[float, Gradient]:
+        fast = self._lazy(c)
+        if fast is not None:
+            return fast
         L, dL = information_lazy(self.info, c, self.x_hat)
         value, gradient = _dispersion(L + self.prior_precision)
         return value, lambda: gradient(dL())
+
+
+def _fused_dispersion(
+    info: ObservationInformation, x_hat: np.ndarray, prior_precision: np.ndarray
+) -> Callable[[np.ndarray], tuple[float, Gradient]] | None:
+    """:meth:`SizeInformation.dispersion_lazy` for ``info`` at x̂ and Λo, or None where it does
+    not apply (another model, a state other than 4)."""
+    discount = info if isinstance(info, FailedViewDiscount) else None
+    base = info.base if isinstance(info, FailedViewDiscount) else info
+    if not isinstance(base, SizeInformation) or np.shape(x_hat) != (4,):
+        return None
+    rows = np.asarray(prior_precision, dtype=float).tolist()
+
+    def lazy(c: np.ndarray) -> tuple[float, Gradient]:
+        odds = None if discount is None else discount.odds_lazy(c, x_hat)
+        return base.dispersion_lazy(c, x_hat, rows, odds)
+
+    return lazy
 
 
 @dataclass(frozen=True)
@@ -245,6 +296,9 @@ class UntriedTerm:
     width_rad: float
     weight: float
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_rows", failed_view_rows(self.failed))
+
     def value(self, c: np.ndarray) -> float:
         return self.value_and_gradient(c)[0]
 
@@ -252,10 +306,19 @@ class UntriedTerm:
         return self.value_and_gradient(c)[1]
 
     def value_and_gradient(self, c: np.ndarray) -> tuple[float, np.ndarray]:
+        rows: tuple[tuple[float, float, float], ...] = self._rows  # type: ignore[attr-defined]
         if not la.norm(np.asarray(c, dtype=float) - self.k_hat) > 0.0:
-            return self.weight * len(self.failed), np.zeros(3)
-        g, rate, dcos = failed_view_kernel(self.failed, c, self.k_hat, self.width_rad)
-        return self.weight * float(g.sum()), self.weight * rate @ dcos
+            return self.weight * len(rows), np.zeros(3)
+        (e0, e1, e2), r, cos, g = failed_view_floats(rows, c, self.k_hat, self.width_rad)
+        # Σ_j (g_j/w)·∂(e·d_j)/∂c, ∂(e·d_j)/∂c = (d_j - (e·d_j) e)/r
+        w = 1.0 - math.cos(self.width_rad)
+        out0 = out1 = out2 = 0.0
+        for (a, b, z), cj, gj in zip(rows, cos, g, strict=True):
+            f = gj / w / r
+            out0 += f * (a - cj * e0)
+            out1 += f * (b - cj * e1)
+            out2 += f * (z - cj * e2)
+        return self.weight * math.fsum(g), self.weight * np.array([out0, out1, out2])
 
     def lazy(self, c: np.ndarray) -> tuple[float, Gradient]:
         value, grad = self.value_and_gradient(c)
