@@ -129,6 +129,9 @@ def test_untried_gradient(rng):
         failed /= np.linalg.norm(failed, axis=1, keepdims=True)
         term = UntriedTerm(k, failed, math.radians(rng.uniform(10.0, 40.0)), rng.uniform(0.5, 3.0))
         _check_term(term, c)
+    # at the estimate there is no direction: every failed view counts in full, no slope
+    value, gradient = term.value_and_gradient(k.copy())
+    assert value == pytest.approx(term.weight * len(failed)) and not np.any(gradient)
 
 
 def _constraints(rng):

@@ -169,12 +169,12 @@ def failed_view_floats(
     dozen float operations, several times faster than the same on (k, 3) arrays.
 
     Raises:
-        ValueError: where c is the estimate (no direction)."""
+        ValueError: where c is the estimate (no direction) or not finite."""
     k0, k1, k2 = np.asarray(k_hat, dtype=float)[:3].tolist()
     c0, c1, c2 = np.asarray(c, dtype=float).tolist()
     d0, d1, d2 = c0 - k0, c1 - k1, c2 - k2
     r = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-    if r == 0.0:
+    if not r > 0.0:  # nan too
         raise ValueError("the camera is at the estimate: no direction to weigh failed views by")
     e0, e1, e2 = d0 / r, d1 / r, d2 / r
     w = 1.0 - math.cos(width_rad)

@@ -307,9 +307,10 @@ class UntriedTerm:
 
     def value_and_gradient(self, c: np.ndarray) -> tuple[float, np.ndarray]:
         rows: tuple[tuple[float, float, float], ...] = self._rows  # type: ignore[attr-defined]
-        if not la.norm(np.asarray(c, dtype=float) - self.k_hat) > 0.0:
+        try:
+            (e0, e1, e2), r, cos, g = failed_view_floats(rows, c, self.k_hat, self.width_rad)
+        except ValueError:  # the camera at the estimate: every failed view counted in full
             return self.weight * len(rows), np.zeros(3)
-        (e0, e1, e2), r, cos, g = failed_view_floats(rows, c, self.k_hat, self.width_rad)
         # Σ_j (g_j/w)·∂(e·d_j)/∂c, ∂(e·d_j)/∂c = (d_j - (e·d_j) e)/r
         w = 1.0 - math.cos(self.width_rad)
         out0 = out1 = out2 = 0.0

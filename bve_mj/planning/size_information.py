@@ -191,7 +191,7 @@ class SizeInformation:
                 not positive definite (the caller then takes the general path)."""
         if len(x_hat) != 4:
             raise ValueError(f"the fused dispersion is for a state of 4, got {len(x_hat)}")
-        k0, k1, k2, r = (float(v) for v in x_hat)
+        k0, k1, k2, r = np.asarray(x_hat, dtype=float).tolist()
         c0, c1, c2 = np.asarray(c, dtype=float).tolist()
         u0, u1, u2 = k0 - c0, k1 - c1, k2 - c2
         rho = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)

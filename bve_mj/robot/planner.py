@@ -207,9 +207,11 @@ class KinematicBvePlanner:
 
         def ineq_jac(q: np.ndarray) -> np.ndarray:
             p, _, J = prob.at(q)
-            dh = prob.look_jacobian(q)
-            JvT = J[:3].T
-            return np.array([-(JvT @ gi.gradient(p)) for gi in every] + [dh[2]])
+            rows = np.empty((len(every) + 1, J.shape[1]))
+            np.matmul(np.array([gi.gradient(p) for gi in every]), J[:3], out=rows[:-1])
+            rows[:-1] *= -1.0
+            rows[-1] = prob.look_jacobian(q)[2]
+            return rows
 
         def eq(q: np.ndarray) -> np.ndarray:
             return prob.look(q)[:2]
