@@ -206,12 +206,9 @@ class KinematicBvePlanner:
             return np.array([-gi.value(p) for gi in every] + [h[2]])
 
         def ineq_jac(q: np.ndarray) -> np.ndarray:
-            p, _, J = prob.at(q)
-            rows = np.empty((len(every) + 1, J.shape[1]))
-            np.matmul(np.array([gi.gradient(p) for gi in every]), J[:3], out=rows[:-1])
-            rows[:-1] *= -1.0
-            rows[-1] = prob.look_jacobian(q)[2]
-            return rows
+            p, _, J = prob.at(q)  # one product for every task constraint's row
+            G = np.array([gi.gradient(p) for gi in every])
+            return np.concatenate((-(G @ J[:3]), prob.look_jacobian(q)[2:3]))
 
         def eq(q: np.ndarray) -> np.ndarray:
             return prob.look(q)[:2]
