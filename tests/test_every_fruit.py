@@ -319,6 +319,29 @@ def test_a_visit_path_is_checked_against_every_track_sphere_on_the_way_not_only_
     np.testing.assert_array_equal(data.qpos, qpos)
 
 
+def test_the_arm_boxes_are_made_once_per_world_and_go_with_it():
+    """The arm's boxes and scratch ``MjData`` are kept for a world while it lives, not after
+    (held by the model, the scratch data's reference to it kept every episode's alive)."""
+    import gc
+
+    from bve_mj.sim import arm_boxes
+
+    ns, q0 = _arm_world()
+
+    class World:  # the world as path_clearance reads it, one that can be weakly referenced
+        def __init__(self) -> None:
+            self.model, self.data, self.kin, self.qpos_adr = ns.model, ns.data, ns.kin, ns.qpos_adr
+
+    world = World()
+    before = len(arm_boxes._ARM_BOXES)
+    boxes = arm_boxes._ArmBoxes.of(world)
+    assert arm_boxes._ArmBoxes.of(world) is boxes and len(arm_boxes._ARM_BOXES) == before + 1
+    assert arm_boxes.path_clearance(world, q0, q0 + 0.2, np.zeros((0, 4)), 10.0) > 0.0
+    del world, boxes
+    gc.collect()
+    assert len(arm_boxes._ARM_BOXES) == before
+
+
 def _arm_world(seed: int = 1):  # the arm in its start scene, as path_clearance reads a world
     from types import SimpleNamespace
 

@@ -38,11 +38,13 @@ def deepest_x(world: MujocoWorld, q: np.ndarray) -> float:
 
 @dataclass(frozen=True)
 class _ArmBoxes:
-    """An arm's geoms in a model (every geom of the arm's bodies), their box half sizes
-    (k, 3), which of them are not the hand's (the last joint's link), and a scratch
-    ``MjData`` the measurements pose the arm in (a world's own is its simulation's): made
-    once per model and arm (:meth:`of`; a new ``MjData`` was ~1 ms of a 2 ms path check).
-    Only its ``qpos`` is ever written, each time whole, as a new ``MjData``'s would be."""
+    """A world's arm geoms (every geom of the arm's bodies), their box half sizes (k, 3),
+    which of them are not the hand's (the last joint's link), and a scratch ``MjData`` the
+    measurements pose the arm in (the world's own is its simulation's): made once per world
+    (:meth:`of`; a new ``MjData`` was ~1 ms of a 2 ms path check) and gone with it (kept by a
+    weak reference to the world: keyed by the model, the ``MjData``'s own reference to its
+    model would keep every episode's model alive). Only its ``qpos`` is ever written, each
+    time whole, as a new ``MjData``'s would be."""
 
     geoms: np.ndarray
     half: np.ndarray
@@ -51,21 +53,26 @@ class _ArmBoxes:
 
     @classmethod
     def of(cls, world: MujocoWorld) -> _ArmBoxes:
-        m, names = world.model, tuple(world.kin.joint_names)
-        per_arm = _ARM_BOXES.setdefault(m, {})
-        if names not in per_arm:
-            geoms = arm_geoms(m, names)
-            hand = set(arm_geoms(m, names[-1:]))
-            per_arm[names] = cls(
-                np.array(geoms), np.array([_box_half(m, g) for g in geoms]).reshape(-1, 3),
-                np.array([g not in hand for g in geoms]), mujoco.MjData(m),
-            )  # fmt: skip
-        return per_arm[names]
+        try:
+            boxes = _ARM_BOXES.get(world)
+        except TypeError:  # a world that cannot be weakly referenced: made each time
+            return cls._make(world)
+        if boxes is None:
+            boxes = _ARM_BOXES[world] = cls._make(world)
+        return boxes
+
+    @classmethod
+    def _make(cls, world: MujocoWorld) -> _ArmBoxes:
+        m, names = world.model, world.kin.joint_names
+        geoms = arm_geoms(m, names)
+        hand = set(arm_geoms(m, names[-1:]))
+        return cls(
+            np.array(geoms), np.array([_box_half(m, g) for g in geoms]).reshape(-1, 3),
+            np.array([g not in hand for g in geoms]), mujoco.MjData(m),
+        )  # fmt: skip
 
 
-_ARM_BOXES: weakref.WeakKeyDictionary[mujoco.MjModel, dict[tuple[str, ...], _ArmBoxes]] = (
-    weakref.WeakKeyDictionary()
-)
+_ARM_BOXES: weakref.WeakKeyDictionary[MujocoWorld, _ArmBoxes] = weakref.WeakKeyDictionary()
 
 
 def _box_half(m: mujoco.MjModel, g: int) -> np.ndarray:
