@@ -34,12 +34,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-import bve_mj.linalg as la
 from bve_mj.estimation.models import BearingSizeModel, MeasurementModel, SizeModel
 
 __all__ = ["TakenViews", "ViewCorrelation", "discounted", "fit_view_correlation", "new_view_share"]
@@ -79,13 +78,16 @@ class ViewCorrelation:
 
 @dataclass(frozen=True)
 class TakenViews:
-    """The views taken, from unit directions (k, 3), with their correlation matrix C and C⁻¹ 1
-    made once: :meth:`share` is then called for each candidate view (the planner calls it at
-    every evaluation of its objective) with one small solve."""
+    """The views taken, from unit directions (k, 3), with the inverse of their correlation
+    matrix C and C⁻¹ 1 made once: :meth:`share` is then called for each candidate view (the
+    planner calls it at every evaluation of its objective) with one product. C = (1 - w) I +
+    w K with K the kernel's matrix (positive semi-definite, unit diagonal), so its smallest
+    eigenvalue is at least 1 - w > 0: well conditioned to invert once (a solve per call
+    was most of the planner's objective where views had been taken)."""
 
     corr: ViewCorrelation
     directions: np.ndarray
-    _C: np.ndarray
+    _Cinv: np.ndarray  # C⁻¹
     _a: np.ndarray  # C⁻¹ 1
 
     @classmethod
@@ -95,21 +97,32 @@ class TakenViews:
             return cls(corr, d, np.zeros((0, 0)), np.zeros(0))
         C = corr.rho(d @ d.T)
         np.fill_diagonal(C, 1.0)
-        return cls(corr, d, C, np.linalg.solve(C, np.ones(len(d))))
+        Cinv = np.linalg.inv(C)
+        return cls(corr, d, Cinv, Cinv.sum(axis=1))
 
     def share(self, e: np.ndarray) -> tuple[float, np.ndarray]:
         """Δ(e): what a view from the unit direction ``e`` (3,) is worth beside these views,
         as a share of a fresh view, and ∂Δ/∂e (3,)."""
+        share, gradient = self.share_lazy(e)
+        return share, gradient()
+
+    def share_lazy(self, e: np.ndarray) -> tuple[float, Callable[[], np.ndarray]]:
+        """:meth:`share` with ∂Δ/∂e computed when called (the planner asks for it at about
+        two thirds of the points it evaluates)."""
         if not len(self._a):
-            return 1.0, np.zeros(3)
-        b = self.corr.rho(self.directions @ e)
-        u = la.solve(self._C, b)  # C⁻¹ b (np.linalg.solve's bits without its per-call checks)
+            return 1.0, lambda: np.zeros(3)
+        corr = self.corr
+        b = corr.weight * np.exp((self.directions @ e - 1.0) / corr.width)  # ρ(e·d_j)
+        u = self._Cinv @ b  # C⁻¹ b
         m = 1.0 - float(b @ self._a)
         s = max(1.0 - float(b @ u), 1e-12)
-        share = min(max(m * m / s, 1e-9), 1.0)
-        # ∂Δ/∂b = 2m (m u - s a) / s²; ∂b_j/∂e = b_j d_j / width
-        db = 2.0 * m * (m * u - s * self._a) / (s * s)
-        return share, (db * b / self.corr.width) @ self.directions
+
+        def gradient() -> np.ndarray:
+            # ∂Δ/∂b = 2m (m u - s a) / s²; ∂b_j/∂e = b_j d_j / width
+            db = 2.0 * m * (m * u - s * self._a) / (s * s)
+            return (db * b / corr.width) @ self.directions
+
+        return min(max(m * m / s, 1e-9), 1.0), gradient
 
 
 def new_view_share(corr: ViewCorrelation, taken: np.ndarray, e: np.ndarray) -> tuple[float, np.ndarray]:

@@ -213,7 +213,7 @@ class SizeInformation:
         fc, fr = 1.0, 1.0
         if views is not None:
             e = np.array([-x0, -x1, -x2])
-            (fc, dfc), (fr, dfr) = (v.share(e) for v in views)
+            (fc, dfc), (fr, dfr) = (v.share_lazy(e) for v in views)
         p, dp = (1.0, None) if odds is None else odds
         a, wv = w_b * fc / (rho * rho), w_a * fr
         v0, v1, v2, v3 = s_a * x0, s_a * x1, s_a * x2, s_r
@@ -289,8 +289,8 @@ class SizeInformation:
             ])  # fmt: skip
             if views is not None:
                 P = (np.eye(3) - np.outer(e, e)) / rho  # ∂e/∂c
-                g += (-p * w_b / (rho * rho) * tr_np) * (P @ dfc)
-                g += (-p * w_a * v_mv + p * w_a * s_r * s_r / m33) * (P @ dfr)
+                g += (-p * w_b / (rho * rho) * tr_np) * (P @ dfc())
+                g += (-p * w_a * v_mv + p * w_a * s_r * s_r / m33) * (P @ dfr())
             if dp is not None:  # ∂p: -tr(M⁻¹ Λn) + Λn_rr/M_rr
                 g += (-(wv * v_mv + a * tr_np) + wv * v3 * v3 / m33) * dp()
             return g
