@@ -12,6 +12,7 @@ from bve_mj.estimation import BearingSizeModel, Belief
 from bve_mj.estimation.noise_fit import fit_noise_model
 from bve_mj.estimation.view_correlation import (
     ViewCorrelation,
+    ViewShares,
     discounted,
     fit_view_correlation,
     new_view_share,
@@ -170,6 +171,31 @@ def test_the_loop_fuses_repeated_views_as_the_share_they_add():
         info = np.linalg.inv(H @ result.final.cov @ H.T)
         np.testing.assert_allclose(info - prior_info, n_eff * 1e6 * np.eye(3), rtol=1e-3, atol=1e-3 * 1e6)
         assert len(planner.fused) == (5 if corr is not None else 0)
+
+
+def test_view_shares_are_new_view_shares_and_each_set_of_views_is_made_once(rng, monkeypatch):
+    """The every-fruit planner's :class:`ViewShares` gives :func:`new_view_share`'s values bit
+    for bit, for each fruit's own directions taken, and makes each set's views once."""
+    from bve_mj.estimation import view_correlation as vc
+
+    corr = (ViewCorrelation(0.3, 0.03), ViewCorrelation(0.5, 0.08))
+    made = []
+    of = vc.TakenViews.of.__func__
+
+    def counting(cls, c, directions):
+        made.append(len(directions))
+        return of(cls, c, directions)
+
+    monkeypatch.setattr(vc.TakenViews, "of", classmethod(counting))
+    shares = ViewShares(*corr)
+    fruits = [np.array([_unit(rng.normal(size=3)) for _ in range(k)]) for k in (1, 2, 4)]
+    for _ in range(3):
+        for taken in fruits:
+            e = _unit(rng.normal(size=3))
+            assert shares(taken, e) == tuple(of(vc.TakenViews, x, taken).share(e)[0] for x in corr)
+    assert len(made) == 2 * len(fruits)  # the centre's and the radius' views, once per fruit
+    shares(fruits[2][:3], e)  # another set of directions: made anew
+    assert len(made) == 2 * len(fruits) + 2
 
 
 @pytest.mark.parametrize("bearing", [True, False])

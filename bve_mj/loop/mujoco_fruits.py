@@ -27,7 +27,7 @@ from bve_mj.estimation import Belief, filter_update
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.tracks import Tracker
 from bve_mj.estimation.unmeasured import in_zone, tracking_config
-from bve_mj.estimation.view_correlation import new_view_share
+from bve_mj.estimation.view_correlation import ViewShares
 from bve_mj.estimation.visibility import outline_shown_deg, visible_arc_deg
 from bve_mj.loop.arm_clearance import (
     PATH_CLEARANCE_M,
@@ -256,6 +256,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     f = cam.focal_px
     min_arc = s.detector.min_arc_deg
     corr = (noise.centre_correlation, noise.radius_correlation)
+    shares = ViewShares(*corr)
 
     rims = s.detector.interior_edge > 0.0
 
@@ -281,8 +282,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         cov = np.diag([(sc / f) ** 2, (sc / f) ** 2, (sr / f) ** 2])
         if len(fruit.directions):
             e = (p - x[:3]) / rho
-            share_c = new_view_share(corr[0], fruit.directions, e)[0]
-            share_r = new_view_share(corr[1], fruit.directions, e)[0]
+            share_c, share_r = shares(fruit.directions, e)
             g = np.sqrt([1.0 / share_c, 1.0 / share_c, 1.0 / share_r])
             cov = cov * np.outer(g, g)
         model = BearingSizeModel(p, R, cov)

@@ -306,24 +306,30 @@ class UntriedTerm:
         return self.value_and_gradient(c)[1]
 
     def value_and_gradient(self, c: np.ndarray) -> tuple[float, np.ndarray]:
+        value, gradient = self.lazy(c)
+        return value, gradient()
+
+    def lazy(self, c: np.ndarray) -> tuple[float, Gradient]:
+        """The value, and a function that computes the gradient (SLSQP's line search asks for
+        values only)."""
         rows: tuple[tuple[float, float, float], ...] = self._rows  # type: ignore[attr-defined]
         try:
             (e0, e1, e2), r, cos, g = failed_view_floats(rows, c, self.k_hat, self.width_rad)
         except ValueError:  # the camera at the estimate: every failed view counted in full
-            return self.weight * len(rows), np.zeros(3)
-        # Σ_j (g_j/w)·∂(e·d_j)/∂c, ∂(e·d_j)/∂c = (d_j - (e·d_j) e)/r
-        w = 1.0 - math.cos(self.width_rad)
-        out0 = out1 = out2 = 0.0
-        for (a, b, z), cj, gj in zip(rows, cos, g, strict=True):
-            f = gj / w / r
-            out0 += f * (a - cj * e0)
-            out1 += f * (b - cj * e1)
-            out2 += f * (z - cj * e2)
-        return self.weight * math.fsum(g), self.weight * np.array([out0, out1, out2])
+            return self.weight * len(rows), lambda: np.zeros(3)
 
-    def lazy(self, c: np.ndarray) -> tuple[float, Gradient]:
-        value, grad = self.value_and_gradient(c)
-        return value, lambda: grad
+        def gradient() -> np.ndarray:
+            # Σ_j (g_j/w)·∂(e·d_j)/∂c, ∂(e·d_j)/∂c = (d_j - (e·d_j) e)/r
+            w = 1.0 - math.cos(self.width_rad)
+            out0 = out1 = out2 = 0.0
+            for (a, b, z), cj, gj in zip(rows, cos, g, strict=True):
+                f = gj / w / r
+                out0 += f * (a - cj * e0)
+                out1 += f * (b - cj * e1)
+                out2 += f * (z - cj * e2)
+            return self.weight * np.array([out0, out1, out2])
+
+        return self.weight * math.fsum(g), gradient
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,8 @@ from bve_mj.robot.kinematics import ArmKinematics
 
 __all__ = ["JointProblem", "LimitMargin", "UprightPreference"]
 
+_LOOK_AXES = [1, 2, 0]  # h = (y_C·d, z_C·d, x_C·d)
+
 
 @dataclass(frozen=True)
 class LimitMargin:
@@ -93,10 +95,10 @@ class UprightPreference:
         w = self.weight
 
         def gradient() -> np.ndarray:
-            up, left = R[:, 2], R[:, 1]
-            da = J[3:].T @ np.array([up[1], -up[0], 0.0])  # up × ẑ
-            db = J[3:].T @ np.array([left[1], -left[0], 0.0])
-            return -w * ((s - a * a) * da - a * b * db) / (s * root)
+            # J_ωᵀ of one vector: -w((s - a²)(up × ẑ) - ab(left × ẑ))/(s√s), v × ẑ = (v_y, -v_x, 0)
+            ca, cb = -w * (s - a * a) / (s * root), w * a * b / (s * root)
+            up_y, left_y, up_x, left_x = float(R[1, 2]), float(R[1, 1]), float(R[0, 2]), float(R[0, 1])
+            return J[3:].T @ np.array([ca * up_y + cb * left_y, -(ca * up_x + cb * left_x), 0.0])
 
         return w * (1.0 - a / root), gradient
 
@@ -132,38 +134,27 @@ class JointProblem:
             rho = la.norm(u)
             d = u / rho
             self._d = (d, rho)
-            self._h = np.array([R[:, axis] @ d for axis in (1, 2, 0)])
+            self._h = (d @ R)[_LOOK_AXES]
         return self._h
 
     def look_jacobian(self, q: np.ndarray) -> np.ndarray:
-        """∂h/∂q at q, (3, n)."""
+        """∂h/∂q at q, (3, n): for each camera axis a, ∂(a·d) = (ω × a)·d + a·∂d = a·[d]× ω +
+        a·∂d (ω = J_ω q̇, ∂d = (d dᵀ - I) J_v q̇ / ρ): the rows y_C, z_C, x_C of Rᵀ [(d dᵀ -
+        I)/ρ | [d]×] J."""
         self.look(q)
         if self._dh is None:
             _, R, J = self.at(q)
             assert self._d is not None
             d, rho = self._d
             d0, d1, d2 = d.tolist()
-            # (d dᵀ - I)/ρ entry by entry (the same operations as on arrays), times J_v: ∂d/∂q
-            dd = (
-                np.array(
-                    [
-                        [(d0 * d0 - 1.0) / rho, (d0 * d1 - 0.0) / rho, (d0 * d2 - 0.0) / rho],
-                        [(d1 * d0 - 0.0) / rho, (d1 * d1 - 1.0) / rho, (d1 * d2 - 0.0) / rho],
-                        [(d2 * d0 - 0.0) / rho, (d2 * d1 - 0.0) / rho, (d2 * d2 - 1.0) / rho],
-                    ]
-                )
-                @ J[:3]
-            )
-            Jw = J[3:]
-            cols = R.tolist()
-            dh = np.empty((3, J.shape[1]))
-            for row, axis in enumerate((1, 2, 0)):
-                a0, a1, a2 = cols[0][axis], cols[1][axis], cols[2][axis]
-                # -[a]× entry by entry (as -skew(a)); ∂a/∂q_i = ω_i × a
-                da = np.array([[-0.0, a2, -a1], [-a2, -0.0, a0], [a1, -a0, -0.0]]) @ Jw
-                a = R[:, axis]
-                dh[row] = d @ da + a @ dd
-            self._dh = dh
+            # fmt: off
+            B = np.array([
+                [(d0 * d0 - 1.0) / rho, d0 * d1 / rho, d0 * d2 / rho, 0.0, -d2, d1],
+                [d1 * d0 / rho, (d1 * d1 - 1.0) / rho, d1 * d2 / rho, d2, 0.0, -d0],
+                [d2 * d0 / rho, d2 * d1 / rho, (d2 * d2 - 1.0) / rho, -d1, d0, 0.0],
+            ])
+            # fmt: on
+            self._dh = (R.T[_LOOK_AXES] @ B) @ J
         return self._dh
 
     def look_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

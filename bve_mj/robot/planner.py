@@ -357,7 +357,7 @@ def _stalled(feasible: Callable[[np.ndarray], bool]) -> Callable[[np.ndarray, fl
         scale, lowered = max(1.0, abs(value)), values[-1 - _STALL_ITERATIONS] - value
         if lowered >= _STALL_REL * scale:
             return False
-        return feasible(q) or abs(lowered) < _STUCK_REL * scale
+        return abs(lowered) < _STUCK_REL * scale or feasible(q)
 
     return halt
 
