@@ -52,6 +52,29 @@ def _synthetic_rows(rng, fruits=40, views=12, offset_rel=None):
     return rows
 
 
+def test_the_views_tail_is_fitted_to_the_rows_the_tracker_fuses(rng):
+    """The model from the target's rows; the outlier mixture from ``outlier_rows`` (the
+    every-fruit detector's), normalised by that model: a tenth of them err 8x (their own
+    error: each fruit's offset is taken out first). Without such rows the target's, which
+    have no tail here."""
+    target = _synthetic_rows(rng)
+    every = _synthetic_rows(rng)
+    for r in every:
+        r["source"] = "every"
+        if rng.random() < 0.1:  # the view's own noise 8x: 63 times its variance added
+            partial = (1 - r["arc_deg"] / 360) * r["radius_px"] / 10
+            sigma = math.sqrt(0.3 * r["centre_fit_px"] ** 2 + 0.02 * partial**2)
+            r["err_u_px"] += rng.normal(0, math.sqrt(63) * sigma)
+            r["err_v_px"] += rng.normal(0, math.sqrt(63) * sigma)
+            r["err_alpha_px"] += rng.normal(0, math.sqrt(63 * 0.25) * r["radius_fit_px"])
+    model, _ = fit_noise_model(target, CameraConfig(), "test", every)
+    assert model.outlier_share == pytest.approx(0.1, abs=0.03)
+    assert model.outlier_scale == pytest.approx(8.0, rel=0.2)
+    alone, _ = fit_noise_model(target, CameraConfig(), "test")
+    assert alone.outlier_share < 0.03 or alone.outlier_scale < 1.5
+    assert alone.centre_var_px2 == model.centre_var_px2  # the model itself is the target's
+
+
 def test_the_fit_recovers_a_known_noise(rng):
     model, report = fit_noise_model(_synthetic_rows(rng), CameraConfig(), "test")
     fit_coef, partial = model.centre_var_px2[1], model.centre_var_px2[2]
@@ -464,12 +487,18 @@ def test_every_fruit_rows_match_each_detection_to_the_fruit_it_measured():
 
 def test_calibrate_every_fruit_adds_the_neighbours_rows(tmp_path, capsys):
     out, rows = tmp_path / "model.json", tmp_path / "rows.json"
-    argv = ["calibrate", "--only", "ripe_truss", "--scenes", "2", "--views", "6", "--every-fruit"]
+    argv = ["calibrate", "--only", "ripe_truss", "--scenes", "2", "--views", "12", "--every-fruit"]
     argv += ["--seed", "5", "--workers", "1", "--out", str(out), "--json", str(rows), "--quiet"]
     assert main(argv) == 0
     doc = json.loads(rows.read_text())
     every = [r for r in doc["rows"] if r.get("source") == "every"]
     assert every and all(r["fruit"] != 0 for r in every)  # neighbours, never the target again
-    assert sum(r.get("source") != "every" for r in doc["rows"]) == 12
-    assert "its neighbours" in capsys.readouterr().out
-    assert "every fruit" in load_noise_model(str(out)).source
+    assert sum(r.get("source") != "every" for r in doc["rows"]) == 24
+    printed = capsys.readouterr().out
+    assert "its neighbours" in printed and "of views err" in printed
+    model = load_noise_model(str(out))
+    assert "every fruit" in model.source
+    # the model is the target's rows' alone; the neighbours' fit its views' tail
+    target = [r for r in doc["rows"] if r.get("source") != "every"]
+    alone, _ = fit_noise_model(target, CameraConfig(), model.source)
+    assert alone.centre_var_px2 == model.centre_var_px2

@@ -13,9 +13,11 @@ spread). With ``every_fruit`` (``bve-mj calibrate --every-fruit``), the every-fr
 refused is a row, matched to the true fruit (``fruit``, its index in the
 scene; ``source: "every"``): the fruit beside the target that ``--fruits all`` fuses too
 (seen off the optical axis, behind and between their neighbours, of every ripeness the mask
-takes), which the target's views alone never sample. The shipped model is fitted without
-them: on held-out seeds they changed nothing (README, "Calibrating what the every-fruit
-filter fuses"). :func:`bve_mj.estimation.noise_fit.fit_noise_model`
+takes), which the target's views alone never sample. The model is fitted to the target's
+rows; the neighbours' rows fit the views' tail (:mod:`bve_mj.estimation.outliers`), which the
+every-fruit tracker fuses with (pooled into the model itself, they changed nothing on
+held-out seeds: README, "Calibrating what the every-fruit filter fuses").
+:func:`bve_mj.estimation.noise_fit.fit_noise_model`
 turns the samples into the noise model the filter uses, each fruit's rows its own
 (:func:`bve_mj.estimation.noise_tail.fruit_key`).
 
@@ -372,9 +374,11 @@ def calibrate(
         source += f"; {len(drawn)} drawn scenes ({drawn[0].name}, ...), one scene each"
     if every_fruit:
         source += "; every fruit"
-    model, report = fit_noise_model(data.rows, camera, source)  # the refusals fit the refusal scale
     target = [r for r in data.rows if r.get("source") != "every"]
     every = [r for r in data.rows if r.get("source") == "every"]
+    # the model is the target's (its refusals fit the refusal scale); the neighbours' rows, what
+    # the every-fruit tracker fuses with it, fit the views' tail
+    model, report = fit_noise_model(target, camera, source, every or None)
     report["views"] = len(target)
     report["refused"] = sum(not r.get("detected") for r in target)
     report["every_fruit_detections"] = sum(bool(r.get("detected")) for r in every)

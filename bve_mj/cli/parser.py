@@ -243,8 +243,9 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument(
         "--every-fruit",
         action="store_true",
-        help="also fit the every-fruit detector's measurements of the target's neighbours "
-        "(--fruits all); the shipped model is fitted without",
+        help="also measure the target's neighbours with the every-fruit detector (--fruits "
+        "all): their errors fit the views' outlier tail the tracker fuses with (the model "
+        "itself is the target's)",
     )
     cal.add_argument("--quiet", action="store_true", help="no progress on stderr")
     res = sub.add_parser(

@@ -232,6 +232,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         f"estimates (3-6 views of a fruit fused) in its 99.9% ellipsoid; × {model.view_tail_scale:.2f} those "
         "of single views (what size-only episodes claim with)"
     )
+    print(
+        f"outliers: {100 * model.outlier_share:.1f}% of views err {model.outlier_scale:.1f}x the σ above "
+        "(a scale mixture the tracker fuses with)"
+    )
     write_json_atomic(out, model.to_json())
     print(f'wrote {out} (wall {data.wall_s:.0f} s); use it with [measurement] noise_model = "{out}"')
     if json_path is not None:

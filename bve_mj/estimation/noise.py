@@ -53,6 +53,12 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaig
   fruits' mean squared normalised error grows as exp(b · refused share) (``refusal_scale``
   b, fitted), and an episode's claimed covariance grows with it
   (:class:`bve_mj.loop.claims.Claims`).
+- a few views err **ten times** the model's σ, and nothing the detector reports tells which
+  (in truss scenes one in sixteen of the every-fruit detector's: a fit along a neighbour's
+  edge). The every-fruit tracker fuses each view under a scale mixture, a share
+  ``outlier_share`` of views erring ``outlier_scale`` times the σ
+  (:mod:`bve_mj.estimation.outliers`), fitted to the neighbours' rows of ``bve-mj calibrate
+  --every-fruit``.
 - the errors are **heavy-tailed**: beyond 3σ several times as often as a Gaussian's. The
   claimed covariance is scaled by κ² (``tail_scale``, fitted: :mod:`bve_mj.estimation.
   noise_tail`) so that its 99.9% ellipsoid, the one the scenario suite judges silent
@@ -77,6 +83,7 @@ import numpy as np
 
 from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
+from bve_mj.estimation.outliers import OutlierMixture
 from bve_mj.estimation.view_correlation import ViewCorrelation
 
 __all__ = [
@@ -157,6 +164,9 @@ class NoiseModel:
         centre_offset_terms: coefficients (3,) of the fruit's own offset's variance [share of
             the radius²] on :data:`OFFSET_FEATURES`, or () (a file that does not say): the
             offset is then ``centre_bias_rel`` whatever was seen.
+        outlier_share, outlier_scale: the views' own errors as a scale mixture: a share π of
+            them err κ times the σ above (:mod:`bve_mj.estimation.outliers`; the tracker
+            fuses with it). π = 0 (a file that does not say): Gaussian.
     """
 
     centre_var_px2: tuple[float, ...]
@@ -175,8 +185,11 @@ class NoiseModel:
     tail_scale: float = 1.0
     view_tail_scale: float = 1.0
     centre_offset_terms: tuple[float, ...] = ()
+    outlier_share: float = 0.0
+    outlier_scale: float = 1.0
 
     def __post_init__(self) -> None:
+        OutlierMixture(self.outlier_share, self.outlier_scale)  # raises ValueError naming it
         for name in ("centre_var_px2", "radius_var_px2"):
             v = getattr(self, name)
             if len(v) != len(FEATURES) or not all(math.isfinite(x) and x >= 0.0 for x in v) or not any(v):
@@ -201,6 +214,11 @@ class NoiseModel:
             raise ValueError(
                 f"centre_offset_terms must be {len(OFFSET_FEATURES)} finite numbers >= 0, or none"
             )
+
+    @property
+    def outliers(self) -> OutlierMixture:
+        """The views' share π of outliers and their scale κ."""
+        return OutlierMixture(self.outlier_share, self.outlier_scale)
 
     def centre_bias_cov(self, radius_m: float) -> np.ndarray:
         """The covariance [m²] (3, 3) of the fruit's own offset of the fitted centre, world frame
@@ -336,6 +354,8 @@ def load_noise_model(name: str = "default") -> NoiseModel:
                 "tail_scale": float(values.get("tail_scale", 1.0)),
                 "view_tail_scale": float(values.get("view_tail_scale", values.get("tail_scale", 1.0))),
                 "centre_offset_terms": tuple(float(x) for x in values.get("centre_offset_terms", ())),
+                "outlier_share": float(values.get("outlier_share", 0.0)),
+                "outlier_scale": float(values.get("outlier_scale", 1.0)),
                 **{k: ViewCorrelation(**values[k]) for k in _CORRELATIONS if k in values},
             }
         )

@@ -16,13 +16,17 @@ from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.noise import OFFSET_FEATURES, NoiseModel, Outline
 from bve_mj.estimation.noise_tail import FruitKey, fruit_key, tail_scale, view_tail_scale
+from bve_mj.estimation.outliers import OutlierMixture, fit_outlier_mixture
 from bve_mj.estimation.view_correlation import ViewCorrelation, fit_view_correlation
 
 __all__ = ["GROSS_SIGMAS", "fit_noise_model", "noise_report"]
 
 
 def fit_noise_model(
-    rows: Sequence[dict[str, Any]], camera: CameraConfig, source: str = ""
+    rows: Sequence[dict[str, Any]],
+    camera: CameraConfig,
+    source: str = "",
+    outlier_rows: Sequence[dict[str, Any]] | None = None,
 ) -> tuple[NoiseModel, dict[str, Any]]:
     """Fit :class:`NoiseModel` to calibration rows (detected views: ``radius_px``, ``arc_deg``,
     ``centre_fit_px``, ``radius_fit_px``, ``fruit_shape_index``, ``err_u_px``, ``err_v_px``,
@@ -33,7 +37,12 @@ def fit_noise_model(
     Gross errors are fitted apart: a detection more than :data:`GROSS_SIGMAS` σ off under a
     first fit (the wrong fruit picked, a neighbour's outline) is no sample of the noise but a
     failure the filter's gate rejects; the model is fitted again without them and the report
-    counts them."""
+    counts them.
+
+    The views' tail (:mod:`bve_mj.estimation.outliers`) is fitted to every view's own error
+    under the model, the gross ones too (a wide belief cannot gate them out), of
+    ``outlier_rows`` (default ``rows``): the every-fruit detector's rows, which the tracker
+    fuses with this model's σ, where the calibration measured them."""
     det = [r for r in rows if r.get("detected")]
     if len(det) < 20:
         raise ConfigError("calibration", len(det), "at least 20 detections to fit a noise model")
@@ -62,11 +71,23 @@ def fit_noise_model(
         tail_scale=tail_scale(kept, refused, model, f, sigmas),
         view_tail_scale=view_tail_scale(kept, refused, model, f, sigmas),
     )
+    mixture = _outlier_mixture([r for r in (outlier_rows or rows) if r.get("detected")], model, f)
+    model = replace(model, outlier_share=mixture.share, outlier_scale=mixture.scale)
     report = noise_report(per_view, model)
     report["refusal_fruits"] = fruits
     report["gross_errors"] = len(det) - len(kept)
     report["fruits"] = len(offsets)
     return model, report
+
+
+def _outlier_mixture(det: Sequence[dict[str, Any]], model: NoiseModel, focal_px: float) -> OutlierMixture:
+    """The scale mixture of these detections' own errors under ``model`` (each fruit's offset,
+    from its views within :data:`GROSS_SIGMAS`, taken out of all of them)."""
+    if not det:
+        return OutlierMixture()
+    kept = [r for r, zc in zip(det, _normalised(det, model), strict=True) if zc <= GROSS_SIGMAS]
+    own = _without_offsets(det, _fruit_offsets(kept, model, focal_px), focal_px)
+    return fit_outlier_mixture(np.square(_components(own, model).reshape(-1, 3)).sum(axis=1), 3)
 
 
 def _row_sigmas(model: NoiseModel, r: dict[str, Any]) -> tuple[float, float]:

@@ -52,6 +52,7 @@ from bve_mj.estimation.assignment import Sighting, assign, belief_from_detection
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.ekf import UpdateResult, nis_threshold
 from bve_mj.estimation.models import BearingSizeModel
+from bve_mj.estimation.outliers import OutlierMixture, mixture_update
 from bve_mj.estimation.track_merge import merge_duplicates
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
 from bve_mj.geometry import unit
@@ -178,6 +179,9 @@ class Tracker:
             sensor declares them: each track's state then carries them (7,), as the
             one-target filter's does (each track estimates them from its own detections; a
             bias left out of the state made tracks claim millimetres they did not have).
+        outliers: the share of views that err several times the noise model's σ and by how
+            much (:mod:`bve_mj.estimation.outliers`): each detection is fused under that
+            mixture. None: Gaussian.
     """
 
     def __init__(
@@ -189,8 +193,10 @@ class Tracker:
         visible: Callable[[np.ndarray, np.ndarray, BearingSizeModel], np.ndarray],
         correlation: tuple[ViewCorrelation, ViewCorrelation] | None = None,
         calibration_sigmas: tuple[float, float, float] | None = None,
+        outliers: OutlierMixture | None = None,
     ) -> None:
         self.config = config
+        self.outliers = outliers if outliers is not None else OutlierMixture()
         self.calibration_sigmas = calibration_sigmas
         self.zone_centre_m = np.asarray(zone_centre_m, dtype=float).copy()
         self.radius_prior = radius_prior
@@ -317,7 +323,7 @@ class Tracker:
             centre_share = new_view_share(self._correlation[0], taken, direction)[0]
             radius_share = new_view_share(self._correlation[1], taken, direction)[0]
             model = discounted(model, centre_share, radius_share)  # type: ignore[assignment]
-        result = self._update(t.belief, s.z, model, None)
+        result, _ = mixture_update(self._update, t.belief, s.z, model, self.outliers)
         t.belief = result.belief
         t.hits += 1
         t.views.add(view)

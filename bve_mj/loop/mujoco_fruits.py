@@ -302,7 +302,9 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     sd = s.tracking.zone_m / 2.0
     zone_belief = Belief(np.r_[zone, radius_prior[0]], np.diag([sd**2] * 3 + [radius_prior[1] ** 2]))
     update = filter_update(s.filter.kind, s.filter.ekf_iterations)
-    tracker = Tracker(s.tracking, zone, radius_prior, update, visible, corr, calibration_sigmas(s))
+    tracker = Tracker(
+        s.tracking, zone, radius_prior, update, visible, corr, calibration_sigmas(s), noise.outliers
+    )
     seen_in_part = Tracker(tracking_config(s.tracking), zone, radius_prior, update, visible)
 
     def known() -> Obstacles:  # the fruit known now (those seen in part: in the work zone)
