@@ -118,6 +118,35 @@ def test_the_assignment_is_the_brute_force_optimum(rng):
         assert got == pytest.approx(best, rel=1e-9, abs=1e-6)
 
 
+@pytest.mark.parametrize("state", [4, 7])
+def test_the_batched_innovations_are_each_pairs_own(rng, state):
+    """The association's NIS matrix, each track's prediction made once per view and the pairs
+    factored in one batch, is each pair's own (to 1e-12), for tracks with and without the
+    camera's biases, sightings of different noise, and sightings from two poses (then pair by
+    pair)."""
+    from bve_mj.estimation.assignment import _innovations, _pair_by_pair
+
+    p = np.zeros(3)
+    R = camera_rotation(p, np.array([0.4, 0.0, 0.0]))
+    for trial in range(10):
+        n, m = int(rng.integers(1, 8)), int(rng.integers(1, 8))
+        centres = np.array([0.4, 0.0, 0.0]) + rng.normal(0.0, 0.04, (n, 3))
+        beliefs = []
+        for c in centres:
+            A = rng.normal(size=(state, state)) * 1e-3
+            beliefs.append(Belief(np.r_[c, 0.03, np.zeros(state - 4)], A @ A.T + np.eye(state) * 1e-7))
+        sightings = [
+            Sighting(_z(c, 0.03, p, R) + rng.normal(0, 2e-3, 3), _model(p, R, rng.uniform(0.3, 5.0)))
+            for c in np.array([0.4, 0.0, 0.0]) + rng.normal(0.0, 0.04, (m, 3))
+        ]
+        if trial % 3 == 2:  # another pose for one of them
+            q = np.array([0.0, 0.05, 0.0])
+            sightings[0] = Sighting(sightings[0].z, _model(q, camera_rotation(q, centres[0]), 1.0))
+        got, ref = _innovations(beliefs, sightings), _pair_by_pair(beliefs, sightings)
+        for a, b in zip(got, ref, strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+
+
 def _run_tracker(n_fruit, seed, views=8, drop_p=0.2, false_views=(2, 5)):
     rng = np.random.default_rng(seed)
     centres, radii = _truss(n_fruit, rng)

@@ -129,6 +129,50 @@ def _innovation(belief: Belief, s: Sighting) -> tuple[float, float]:
     return float(w @ w), 2.0 * float(np.sum(np.log(np.diag(L))))
 
 
+def _innovations(beliefs: Sequence[Belief], sightings: Sequence[Sighting]) -> tuple[np.ndarray, np.ndarray]:
+    """The (n_beliefs, n_sightings) NIS and NIS + ln det S of every pair. The sightings of one
+    view share the camera's pose, and h(x) and H(x) depend on the belief and the pose alone:
+    each belief's prediction is made once per pose, the pairs' S factored in one batch (a
+    pair whose S is not positive definite, or sightings of different kinds, pair by pair)."""
+    if not beliefs or not sightings:
+        return _pair_by_pair(beliefs, sightings)  # no pair: all inf
+    models = [s.model for s in sightings]
+    first = models[0]
+    same = all(
+        type(m) is type(first)
+        and np.array_equal(m.p_world_camera, first.p_world_camera)
+        and np.array_equal(m.R_world_camera, first.R_world_camera)
+        for m in models
+    )
+    if not same:
+        return _pair_by_pair(beliefs, sightings)
+    h = np.array([np.atleast_1d(first.predict(b.mean)) for b in beliefs])  # (nb, m)
+    HPH = np.array([(H := np.atleast_2d(first.jacobian(b.mean))) @ b.cov @ H.T for b in beliefs])
+    z = np.array([np.asarray(s.z, dtype=float) for s in sightings])  # (ns, m)
+    R = np.array([np.atleast_2d(m.noise_cov) for m in models])  # (ns, m, m)
+    S = HPH[:, None] + R[None, :]
+    S = 0.5 * (S + np.swapaxes(S, -1, -2))
+    y = z[None, :, :] - h[:, None, :]
+    try:
+        L = np.linalg.cholesky(S)
+    except np.linalg.LinAlgError:  # one pair's S not positive definite: each pair alone
+        return _pair_by_pair(beliefs, sightings)
+    w = np.linalg.solve(L, y[..., None])[..., 0]
+    nis = np.sum(w * w, axis=-1)
+    logdet = 2.0 * np.sum(np.log(np.diagonal(L, axis1=-2, axis2=-1)), axis=-1)
+    return nis, nis + logdet
+
+
+def _pair_by_pair(beliefs: Sequence[Belief], sightings: Sequence[Sighting]) -> tuple[np.ndarray, np.ndarray]:
+    nis = np.full((len(beliefs), len(sightings)), math.inf)
+    cost = np.full((len(beliefs), len(sightings)), math.inf)
+    for i, b in enumerate(beliefs):
+        for j, s in enumerate(sightings):
+            d2, logdet = _innovation(b, s)
+            nis[i, j], cost[i, j] = d2, d2 + logdet
+    return nis, cost
+
+
 def assign(
     beliefs: Sequence[Belief], sightings: Sequence[Sighting], gate_probability: float
 ) -> tuple[list[tuple[int, int]], np.ndarray]:
@@ -137,13 +181,7 @@ def assign(
     passes the gate (the χ²₃ quantile of ``gate_probability``); and the (n_beliefs,
     n_sightings) NIS matrix (inf where the innovation covariance is singular)."""
     nb, ns = len(beliefs), len(sightings)
-    nis = np.full((nb, ns), math.inf)
-    cost = np.full((nb, ns), math.inf)
-    for i, b in enumerate(beliefs):
-        for j, s in enumerate(sightings):
-            d2, logdet = _innovation(b, s)
-            nis[i, j] = d2
-            cost[i, j] = d2 + logdet
+    nis, cost = _innovations(beliefs, sightings)
     if nb == 0 or ns == 0:
         return [], nis
     gate = nis_threshold(gate_probability, 3)
