@@ -140,7 +140,8 @@ class ViewShares:
     """The shares (:func:`new_view_share`) of a view's bearing and apparent size for many
     fruit and candidate views, each fruit's :class:`TakenViews` made once for its directions
     taken (the every-fruit planner scores every fruit at every candidate view: a correlation
-    matrix and its inverse per score were ~5% of its time with 8 tracks)."""
+    matrix and its inverse per score, inside a scoring that took 1.2 of a 30 ms plan with 8
+    tracks)."""
 
     centre: ViewCorrelation
     radius: ViewCorrelation
