@@ -467,6 +467,71 @@ def test_a_standing_dispute_holds_the_claim_back_and_sends_the_planner_elsewhere
     assert undisputed.outcome == "converged"
 
 
+class _Axes(_Scripted):
+    """A world whose view k measures the point directly, precisely (0.1 mm) along the axes
+    ``axes[k]`` only (1 m along the others)."""
+
+    def __init__(self, point, axes):  # type: ignore[no-untyped-def]
+        super().__init__([point] * len(axes))
+        self.axes = axes
+
+    def observe(self, belief=None):  # type: ignore[no-untyped-def]
+        import dataclasses
+
+        obs = super().observe(belief)
+        sigma = np.ones(3)
+        sigma[list(self.axes[min(self.view - 1, len(self.axes) - 1)])] = 1e-4
+        model = dataclasses.replace(obs.model, noise_cov_camera=np.diag(sigma**2))
+        return dataclasses.replace(obs, model=model)
+
+
+def test_converged_needs_an_answer_that_rests_on_no_single_view():
+    """View 0 alone measures x; views 1 and 2 measure y and z: σmax is 0.1 mm after three
+    views, but without view 0 the claim is the prior's 20 mm along x, so the redundant rule
+    waits for view 3, which measures x again (the plain rule converges at view 2). Each
+    leave-one-out belief is the exact Kalman filter's (information form) without that view."""
+    from bve_mj.config import FilterConfig
+    from bve_mj.estimation.belief import Belief
+    from bve_mj.loop.episode import EpisodeLoop, StopRules, run_episode
+
+    truth = np.array([0.40, 0.0, 0.20])
+    prior = Belief.isotropic(np.array([0.41, 0.01, 0.19]), 0.02)
+    axes = [(0,), (1, 2), (1, 2), (0,), (1, 2)]
+    rules = StopRules(sigma_m=1.5e-3, min_accepted=3, redundant=True)
+    plain = dataclasses.replace(rules, redundant=False)
+    assert run_episode(_Axes(truth, axes), _Still(), prior, FilterConfig(), 4, plain).outcome == "converged"
+    result = run_episode(_Axes(truth, axes), _Still(), prior, FilterConfig(), 4, rules)
+    assert result.outcome == "converged" and len(result.views) == 4
+    assert result.views[2].belief.sigma_max_m < 1e-3  # the plain rule's stop, held back
+
+    loop = EpisodeLoop(_Axes(truth, axes), prior, FilterConfig(process_sigma_m=0.0), _Still())
+    loop.start()
+    for i in range(1, 4):
+        if i == 3:  # views 0-2: without view 0, x is the prior's
+            assert loop.leave_one_out()[0].sigma_max_m > 0.01 > loop.leave_one_out()[1].sigma_max_m
+        loop.step(_Still().plan(loop.belief, np.zeros(3), i))
+    info0 = np.linalg.inv(prior.cov)
+    for k, left in enumerate(loop.leave_one_out()):
+        info, vec = info0.copy(), info0 @ prior.mean
+        for j, ax in enumerate(axes[:4]):
+            if j != k:
+                sigma = np.ones(3)
+                sigma[list(ax)] = 1e-4
+                info += np.diag(sigma**-2)
+                vec += np.diag(sigma**-2) @ truth
+        np.testing.assert_allclose(left.cov, np.linalg.inv(info), rtol=1e-6, atol=1e-16)
+        np.testing.assert_allclose(left.mean, np.linalg.solve(info, vec), atol=1e-9)
+    wide, asked = Belief.isotropic(truth, 0.01), []
+
+    def ask():  # type: ignore[no-untyped-def]
+        asked.append(1)
+        return [wide]
+
+    assert rules.outcome(loop.views, ask) is None and asked
+    asked.clear()
+    assert dataclasses.replace(rules, sigma_m=1e-6).outcome(loop.views, ask) is None and not asked
+
+
 def test_a_stalled_camera_is_sent_elsewhere_before_a_stall_ends_the_episode():
     """A camera that stalls (three planned views within ``stall_m``) tells a planner that learns
     from failed views that the view it holds at is spent, up to ``stall_escapes`` times (event

@@ -205,10 +205,12 @@ class ViewPlanningEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def _localised(self) -> bool:
         """The episode's ``converged`` rule: claimed σmax below the threshold with enough
-        accepted measurements since the last belief reset, and no dispute standing."""
+        accepted measurements since the last belief reset, with any one of them left out
+        too, and no dispute standing."""
         ep = self.settings.episode
         rule = StopRules.for_episode(dataclasses.replace(ep, approach=False), self.settings.measurement.kind)
-        return rule.outcome(self._running().views) == Outcome.CONVERGED
+        loop = self._running()
+        return rule.outcome(loop.views, loop.leave_one_out) == Outcome.CONVERGED
 
     def _image(self) -> np.ndarray:
         assert self._parts is not None

@@ -100,7 +100,7 @@ def run_episode(
         plan, events = _plan_or_hold(planner, loop.belief, world.p_world_camera, i)
         loop.step(plan, escaped + events)
         escaped = []
-        outcome = stop.outcome(loop.views) if stop is not None else None
+        outcome = stop.outcome(loop.views, loop.leave_one_out) if stop is not None else None
         stalled = outcome == Outcome.STALLED and escapes > 0 and i < steps  # a view left to take
         if stalled and isinstance(planner, LearnsFromFailedViews):
             # the planner's optimum near here repeats this view's errors: told it is spent,
@@ -159,6 +159,7 @@ class EpisodeLoop:
         self._accepted: list[Observation] = []  # the measurements fused since the last belief reset
         self._innovations: list[tuple[float, int]] = []  # (NIS, dimension) of the accepted, since a reset
         self._fused: list[np.ndarray] = []  # unit directions estimate → camera of the accepted, since a reset
+        self._refused_share = 0.0  # of the views so far, as the last claim counted it
         self._reporting = world if isinstance(world, ReportsViews) else None  # asked once, not at each
         self._encoders = world if isinstance(world, ReadsEncoders) else None  # view: ~0.1 ms a check
 
@@ -199,6 +200,26 @@ class EpisodeLoop:
         if outcome.localised and another_fruit_fits_the_prior(self.prior, belief, views, odds):
             outcome = Outcome.AMBIGUOUS
         return EpisodeResult(self.prior, tuple(views), time.perf_counter() - self._t0, outcome)
+
+    def leave_one_out(self) -> list[Belief]:
+        """What the episode would claim now with each measurement fused since the last belief
+        reset left out in turn (the others fused again from the prior, in their order; the
+        claim's innovation and refusal scales as they are): the claims no single view shaped.
+        Empty with fewer than two such measurements."""
+        accepted, claims = self._accepted, self.claims
+        if len(accepted) < 2:
+            return []
+        out = []
+        for k in range(len(accepted)):
+            others = accepted[:k] + accepted[k + 1 :]
+            belief = self.prior
+            for obs in others:
+                belief = self._update(belief, obs.z, obs.model, None).belief
+            if claims is not None:
+                outlines = [o.outline for o in others]
+                belief = claims.claim(belief, self._innovations, self._refused_share, outlines)
+            out.append(belief)
+        return out
 
     def _fuse(
         self, i: int, status: PlanStatus | None, feasible: bool, plan_s: float, events: list[Event]
@@ -255,6 +276,7 @@ class EpisodeLoop:
             claimed = belief
         else:  # the share of the views so far, this one included, in which nothing was measured
             refused = (sum(not v.measured for v in views) + (not measured)) / (len(views) + 1)
+            self._refused_share = refused
             outlines = [o.outline for o in self._accepted]
             claimed = self.claims.claim(belief, innovations, refused, outlines)
         views.append(
