@@ -12,11 +12,11 @@ touched a fruit (episode: least distance [mm]) and the outcomes, then the totals
 
 from __future__ import annotations
 
-import argparse
 from collections import Counter
 
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.campaigns.spec import episode_seed
+from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import with_overrides
 from bve_mj.errors import BveError
 from bve_mj.estimation.belief import Belief
@@ -43,14 +43,12 @@ class Clearance:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = ScriptParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", default=None, help="comma-separated scenario names (default: all)")
-    ap.add_argument("--episodes", type=int, default=5)
-    ap.add_argument("--seed", type=int, default=7373)
+    ap.add_argument("--episodes", type=integer(1), default=5)
+    ap.add_argument("--seed", type=SEED, default=7373)
     ap.add_argument("--approach", action="store_true")
     args = ap.parse_args()
-    if args.episodes < 1:
-        ap.error("--episodes: must be at least 1")
     try:
         suite = load_suite(only=None if args.only is None else args.only.split(","))
     except BveError as exc:
@@ -78,4 +76,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

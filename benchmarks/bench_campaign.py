@@ -14,7 +14,6 @@ runs into a fresh directory, so nothing is resumed; the figures include process 
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
 from pathlib import Path
@@ -22,6 +21,7 @@ from pathlib import Path
 from bve_mj import Settings
 from bve_mj.campaigns.runner import run_campaign
 from bve_mj.campaigns.spec import CampaignSpec
+from bve_mj.cli.script import ScriptParser, guarded, integer
 
 
 def _stable(rows: tuple[dict, ...]) -> list[dict]:
@@ -29,9 +29,11 @@ def _stable(rows: tuple[dict, ...]) -> list[dict]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--synthetic-runs", type=int, default=20, help="runs per experiment (10 experiments)")
-    ap.add_argument("--mujoco-runs", type=int, default=20, help="episodes (E5)")
+    ap = ScriptParser()
+    ap.add_argument(
+        "--synthetic-runs", type=integer(1), default=20, help="runs per experiment (10 experiments)"
+    )
+    ap.add_argument("--mujoco-runs", type=integer(1), default=20, help="episodes (E5)")
     ap.add_argument("--cases", default="synthetic,mujoco,paired", help="comma-separated")
     args = ap.parse_args()
     mujoco = {
@@ -67,4 +69,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

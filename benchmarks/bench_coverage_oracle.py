@@ -25,7 +25,6 @@ survey after the harvest could measure of the fruit they hid.
 
 from __future__ import annotations
 
-import argparse
 import math
 import re
 from collections import Counter
@@ -37,6 +36,7 @@ import numpy as np
 from bve_mj.campaigns.calibration import fruit_images, matched_fruit
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.campaigns.spec import episode_seed
+from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import Settings, with_overrides
 from bve_mj.errors import BveError
 from bve_mj.loop.mujoco import episode_settings
@@ -143,18 +143,14 @@ def oracle_episode(settings: Settings, seed: int, views: int, picked: bool = Fal
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = ScriptParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="truss_cluster")
-    ap.add_argument("--episodes", type=int, default=5)
-    ap.add_argument("--seed", type=int, default=3141)
-    ap.add_argument("--views", type=int, default=30, help="sampled views per scene")
+    ap.add_argument("--episodes", type=integer(1), default=5)
+    ap.add_argument("--seed", type=SEED, default=3141)
+    ap.add_argument("--views", type=integer(1), default=30, help="sampled views per scene")
     ap.add_argument("--picked", action="store_true", help="views with the fruit the episode localised picked")
     ap.add_argument("--quiet", action="store_true", help="only the summary per scenario")
     args = ap.parse_args()
-    if args.episodes < 1:
-        ap.error("--episodes: must be at least 1")
-    if args.views < 1:
-        ap.error("--views: must be at least 1")
     try:
         suite = load_suite(only=args.scenario.split(","))
     except BveError as exc:
@@ -195,4 +191,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

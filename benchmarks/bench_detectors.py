@@ -14,28 +14,33 @@ time per view [ms] and the wall time. One process, one BLAS thread (as the suite
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections import Counter
+from typing import get_args
 
 import numpy as np
 
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.campaigns.spec import episode_seed
+from bve_mj.cli.script import SEED, ScriptParser, guarded, integer, names, number
 from bve_mj.config import with_overrides
+from bve_mj.config.fields import DetectorKind
 from bve_mj.loop.mujoco import run_mujoco_episode
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = ScriptParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="clean", help="a scenario of the suite (default clean)")
-    ap.add_argument("--seeds", type=int, default=10, help="episodes per detector kind (default 10)")
-    ap.add_argument("--seed", type=int, default=0, help="the suite seed the episodes' seeds come from")
-    ap.add_argument("--kinds", default="builtin,synthetic_boxes", help="detector kinds, comma-separated")
-    ap.add_argument("--box-noise-px", type=float, default=2.0, help="synthetic boxes: corner sigma [px]")
-    ap.add_argument("--miss-p", type=float, default=0.0, help="synthetic boxes: miss probability")
+    ap.add_argument("--seeds", type=integer(1), default=10, help="episodes per detector kind (default 10)")
+    ap.add_argument("--seed", type=SEED, default=0, help="the suite seed the episodes' seeds come from")
+    kinds = names(get_args(DetectorKind))
+    ap.add_argument("--kinds", type=kinds, default=["builtin", "synthetic_boxes"], help="detector kinds")
     ap.add_argument(
-        "--false-positives", type=float, default=0.0, help="synthetic boxes: false boxes per image"
+        "--box-noise-px", type=number(0.0), default=2.0, help="synthetic boxes: corner sigma [px]"
+    )
+    ap.add_argument("--miss-p", type=number(0.0, 1.0), default=0.0, help="synthetic boxes: miss probability")
+    ap.add_argument(
+        "--false-positives", type=number(0.0), default=0.0, help="synthetic boxes: false boxes per image"
     )
     args = ap.parse_args()
     (scenario,) = load_suite(only=[args.scenario])
@@ -49,7 +54,7 @@ def main() -> None:
         f"{'kind':<16} {'median mm':>9} {'p95 mm':>8} {'max mm':>8} {'views':>5} {'detect ms':>9} "
         f"{'wall s':>7}  outcomes"
     )
-    for kind in args.kinds.split(","):
+    for kind in args.kinds:
         settings = with_overrides(
             base,
             detector={
@@ -78,4 +83,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

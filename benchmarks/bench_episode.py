@@ -9,7 +9,6 @@ Targets: a 15-view episode without video in under 5 s on this machine (issue 5),
 
 from __future__ import annotations
 
-import argparse
 import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -17,6 +16,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from bve_mj import Settings
+from bve_mj.cli.script import ScriptParser, guarded, integer
 from bve_mj.config import with_overrides
 from bve_mj.loop.mujoco import run_mujoco_episode
 
@@ -33,9 +33,9 @@ def _one(args: tuple[str, str, int]) -> tuple[str, str, int, float, float, int, 
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--scenes", type=int, default=50)
-    ap.add_argument("--workers", type=int, default=2)
+    ap = ScriptParser()
+    ap.add_argument("--scenes", type=integer(0), default=50)
+    ap.add_argument("--workers", type=integer(1, 1024), default=2)
     args = ap.parse_args()
 
     # 1. a full 15-view episode (stopping rules off), time per stage
@@ -93,4 +93,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

@@ -13,7 +13,6 @@ its own directory under ``--out`` (resumable: the same command continues an inte
 
 from __future__ import annotations
 
-import argparse
 import math
 import tempfile
 import time
@@ -24,6 +23,7 @@ import numpy as np
 from bve_mj.campaigns.runner import run_campaign
 from bve_mj.campaigns.scenarios import SILENT_NEES, load_suite
 from bve_mj.campaigns.spec import CampaignSpec
+from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import load_settings
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.threads import one_blas_thread
@@ -32,14 +32,14 @@ FAULTS = Path(__file__).resolve().parents[1] / "examples" / "scenarios" / "fault
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--episodes", type=int, default=1000, help="in all, spread evenly over the scenarios")
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--seed", type=int, default=0)
+    ap = ScriptParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument(
+        "--episodes", type=integer(1), default=1000, help="in all, spread evenly over the scenarios"
+    )
+    ap.add_argument("--workers", type=integer(1, 1024), default=2)
+    ap.add_argument("--seed", type=SEED, default=0)
     ap.add_argument("--out", type=Path, default=None, help="campaign directories (default: a temporary one)")
     args = ap.parse_args()
-    if args.episodes < 1 or args.workers < 1 or args.seed < 0:
-        ap.error("--episodes and --workers must be >= 1, --seed >= 0")
     scenarios = load_suite()
     runs = math.ceil(args.episodes / len(scenarios))
     tmp = tempfile.TemporaryDirectory() if args.out is None else None
@@ -82,4 +82,4 @@ def _line(name: str, rows: list[dict], min_radius_m: float) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

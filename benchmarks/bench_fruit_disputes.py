@@ -19,7 +19,6 @@ fruit, those with a dispute standing, the mean claim NEES of both groups and the
 
 from __future__ import annotations
 
-import argparse
 import math
 from typing import Any
 
@@ -28,6 +27,7 @@ import numpy as np
 import bve_mj.loop.every_fruit as every_fruit
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.campaigns.spec import episode_seed
+from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import with_overrides
 from bve_mj.estimation.metrics import chi2_quantile
 from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
@@ -52,9 +52,9 @@ def standing_dispute(innovations: list[tuple[float, int]], directions: list[np.n
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seed", type=int, default=3456)
-    ap.add_argument("--episodes", type=int, default=20)
+    ap = ScriptParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seed", type=SEED, default=3456)
+    ap.add_argument("--episodes", type=integer(1), default=20)
     ap.add_argument("--only", default=SCENES)
     args = ap.parse_args()
     history: dict[int, tuple[list[tuple[float, int]], list[np.ndarray]]] = {}
@@ -66,7 +66,7 @@ def main() -> None:
 
     every_fruit.claimed = keeping
     silent_nees = float(chi2_quantile(0.999, 3))
-    suite = {sc.name: sc for sc in load_suite()}
+    suite = {sc.name: sc for sc in load_suite(only=args.only.split(","))}
     print(f"seed {args.seed}, {args.episodes} episodes a scenario")
     head = ("localised", "disputed", "NEES disputed", "NEES others", "silent", "merged")
     print(f"{'scenario':15s} " + " ".join(f"{h:>{max(len(h), 6)}s}" for h in head))
@@ -96,4 +96,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

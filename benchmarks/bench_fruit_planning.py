@@ -13,13 +13,13 @@ Target (issue 14): a planning step with 8 tracks at most 30 ms (median).
 
 from __future__ import annotations
 
-import argparse
 import itertools
 
 import numpy as np
 
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.campaigns.spec import episode_seed
+from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import with_overrides
 from bve_mj.errors import BveError
 from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
@@ -34,15 +34,11 @@ def _cell(ms: list[float]) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = ScriptParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="truss_chain,truss_cluster,ripe_truss,cherry_truss,plant_trusses")
-    ap.add_argument("--episodes", type=int, default=5)
-    ap.add_argument("--seed", type=int, default=8080)
+    ap.add_argument("--episodes", type=integer(1), default=5)
+    ap.add_argument("--seed", type=SEED, default=8080)
     args = ap.parse_args()
-    if not 1 <= args.episodes <= 1000:
-        ap.error("--episodes: an integer in [1, 1000]")
-    if args.seed < 0:
-        ap.error("--seed: an integer >= 0")
     try:
         suite = load_suite(only=args.scenario.split(","))
     except BveError as exc:
@@ -71,4 +67,4 @@ def _line(name: str, rows: list[tuple[int, float]]) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

@@ -9,17 +9,17 @@ Target (issue 15): one env step <= 60 ms on the 2-core development machine, rend
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 
+from bve_mj.cli.script import ScriptParser, guarded, integer
 from bve_mj.gym.env import ViewPlanningEnv
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--steps", type=int, default=60)
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=integer(1), default=60)
     ap.add_argument("--scenario", default="clean")
     args = ap.parse_args()
     env = ViewPlanningEnv(scenario=args.scenario)
@@ -54,4 +54,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

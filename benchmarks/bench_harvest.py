@@ -14,7 +14,6 @@ Target (issue 14): every ripe fruit visited within 0.1 m, never touching any fru
 
 from __future__ import annotations
 
-import argparse
 import math
 from collections.abc import Sequence
 from typing import get_args
@@ -23,6 +22,7 @@ import numpy as np
 
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.campaigns.spec import episode_seed
+from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import PlannerKind, with_overrides
 from bve_mj.errors import BveError
 from bve_mj.loop.arm_clearance import FruitClearance
@@ -70,17 +70,13 @@ def _reached(visit: Visit) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = ScriptParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="ripe_truss")
-    ap.add_argument("--episodes", type=int, default=10)
-    ap.add_argument("--seed", type=int, default=4242)
-    ap.add_argument("--planner", default="bve", help="the views' planner: bve, random, circle or fixed")
+    ap.add_argument("--episodes", type=integer(1), default=10)
+    ap.add_argument("--seed", type=SEED, default=4242)
+    ap.add_argument("--planner", default="bve", choices=get_args(PlannerKind), help="the views' planner")
     ap.add_argument("--quiet", action="store_true", help="only the count per scenario")
     args = ap.parse_args()
-    if args.episodes < 1:
-        ap.error("--episodes: must be at least 1")
-    if args.planner not in get_args(PlannerKind):
-        ap.error(f"--planner: one of {', '.join(get_args(PlannerKind))}")
     try:
         suite = load_suite(only=args.scenario.split(","))
     except BveError as exc:
@@ -117,4 +113,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

@@ -9,19 +9,19 @@ Targets (issue 3): median at most 1 ms, success at least 99%.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 
+from bve_mj.cli.script import ScriptParser, guarded, integer
 from bve_mj.robot import ROBOTS, ArmKinematics, get_robot, look_at_ik
 
 LIMITS = {"manipulator_h": "emanual", "ur5": "urdf", "panda": "urdf"}
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--targets", type=int, default=1000)
+    ap = ScriptParser()
+    ap.add_argument("--targets", type=integer(1), default=1000)
     args = ap.parse_args()
     print(f"look-at IK from home on {args.targets} reachable targets per arm (seed 0)")
     print(f"{'arm':<14} {'limits':<8} {'success %':>9} {'median ms':>9} {'p95 ms':>7} {'starts':>6}")
@@ -46,4 +46,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

@@ -9,20 +9,20 @@ a constraint, finite-difference gradient) is slow; it runs on fewer runs.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 
 from bve_mj.campaigns.paper import run_synthetic
+from bve_mj.cli.script import ScriptParser, guarded, integer
 from bve_mj.config import Settings, with_overrides
 from bve_mj.config.experiments import EXPERIMENTS
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--runs", type=int, default=20)
-    ap.add_argument("--cartesian-runs", type=int, default=3)
+    ap = ScriptParser()
+    ap.add_argument("--runs", type=integer(1), default=20)
+    ap.add_argument("--cartesian-runs", type=integer(1), default=3)
     args = ap.parse_args()
     print("BVE step with kinematic feasibility (Manipulator-H, emanual limits, range measurement)")
     print(
@@ -48,4 +48,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

@@ -18,7 +18,6 @@ wrong (accepted out of tolerance), counted by distance and image overlap
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 import time
@@ -27,6 +26,7 @@ from collections import Counter, defaultdict
 import mujoco
 import numpy as np
 
+from bve_mj.cli.script import ScriptParser, guarded, integer
 from bve_mj.config import Settings
 from bve_mj.geometry import camera_rotation
 from bve_mj.perception import Detection, Intrinsics, detect
@@ -209,8 +209,8 @@ _OVERLAPS = (
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--views", type=int, default=30)
+    ap = ScriptParser()
+    ap.add_argument("--views", type=integer(1), default=30)
     ap.add_argument("--skip-leaf", action="store_true", help="skip the (slow) leaf-occlusion table")
     args = ap.parse_args()
     s = Settings()
@@ -277,4 +277,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

@@ -7,18 +7,18 @@ Target (issue 2): at most 60 s on 2 cores.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 from bve_mj.campaigns.paper import run_table
+from bve_mj.cli.script import ScriptParser, guarded, integer
 from bve_mj.config import Settings, with_overrides
 from bve_mj.config.experiments import EXPERIMENTS
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--runs", type=int, default=100)
+    ap = ScriptParser()
+    ap.add_argument("--workers", type=integer(1, 1024), default=2)
+    ap.add_argument("--runs", type=integer(1), default=100)
     args = ap.parse_args()
     exps = [EXPERIMENTS[n] for n in ("E1", "E2", "E3", "E4", "E6", "E7", "E8", "E9")]
     for measurement in ("range", "camera"):
@@ -36,4 +36,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

@@ -16,7 +16,6 @@ with the share the loop drops as fragments (``bve_mj.estimation.unmeasured.too_s
 
 from __future__ import annotations
 
-import argparse
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -25,6 +24,7 @@ import numpy as np
 
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.campaigns.spec import episode_seed
+from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import with_overrides
 from bve_mj.estimation.assignment import Sighting
 from bve_mj.estimation.models import BearingSizeModel
@@ -87,9 +87,9 @@ class _Refusals:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seed", type=int, default=8642)
-    ap.add_argument("--episodes", type=int, default=20)
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seed", type=SEED, default=8642)
+    ap.add_argument("--episodes", type=integer(1), default=20)
     ap.add_argument("--only", default="ripe_truss,truss_chain,truss_cluster,cherry_truss,plant_trusses")
     args = ap.parse_args()
     rec = _Refusals()
@@ -120,4 +120,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

@@ -13,23 +13,23 @@ Target (issue 15): videos with the floor at the bottom, never at the cost of rea
 
 from __future__ import annotations
 
-import argparse
 import math
 
 import numpy as np
 
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.campaigns.spec import episode_seed
+from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import with_overrides
 from bve_mj.loop.mujoco import run_mujoco_episode
 from bve_mj.robot.ik import image_roll_rad
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = ScriptParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenarios", default="clean,truss_cluster")
-    ap.add_argument("--episodes", type=int, default=10)
-    ap.add_argument("--seed", type=int, default=4242)
+    ap.add_argument("--episodes", type=integer(1), default=10)
+    ap.add_argument("--seed", type=SEED, default=4242)
     args = ap.parse_args()
     for sc in load_suite(only=args.scenarios.split(",")):
         base = sc.settings(None, None, None)
@@ -56,4 +56,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

@@ -10,35 +10,33 @@ planning time per step.
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 
 from bve_mj.campaigns.paper import run_synthetic
+from bve_mj.cli.script import SEED, ScriptParser, guarded, integer, integers, names
 from bve_mj.config import Settings, with_overrides
 from bve_mj.config.experiments import EXPERIMENTS
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--runs", type=int, default=30)
-    ap.add_argument("--seed", type=int, default=11)
-    ap.add_argument("--measurement", default="camera")
-    ap.add_argument("--experiments", default="E1,E2,E3,E4")
-    ap.add_argument("--horizons", default="1,2,3")
-    ap.add_argument("--steps", type=int, default=None)
+    ap = ScriptParser()
+    ap.add_argument("--runs", type=integer(1), default=30)
+    ap.add_argument("--seed", type=SEED, default=11)
+    ap.add_argument("--measurement", default="camera", choices=("camera", "range"))
+    ap.add_argument("--experiments", type=names(EXPERIMENTS), default=["E1", "E2", "E3", "E4"])
+    ap.add_argument("--horizons", type=integers(1, 6), default=[1, 2, 3])
+    ap.add_argument("--steps", type=integer(1), default=None)
     args = ap.parse_args()
-    names = args.experiments.split(",")
+    chosen = args.experiments
     rows: list[tuple[str, dict[str, object]]] = [
-        (f"bve H={h}" if h != "1" else "bve greedy", {"kind": "bve", "horizon": int(h)})
-        for h in args.horizons.split(",")
+        (f"bve H={h}" if h != 1 else "bve greedy", {"kind": "bve", "horizon": h}) for h in args.horizons
     ]
     rows += [("circle", {"kind": "circle"}), ("random", {"kind": "random"})]
     print(
         f"{args.measurement} measurement, {args.runs} runs per experiment, seed {args.seed}: "
         "Euclidean error mean / median / the final covariance's rms sqrt(tr P) (mean) [mm], plan ms median"
     )
-    print(f"{'planner':<12}" + "".join(f"{n:>22}" for n in names))
+    print(f"{'planner':<12}" + "".join(f"{n:>22}" for n in chosen))
     errors: dict[str, dict[str, np.ndarray]] = {}
     for label, planner in rows:
         s = with_overrides(
@@ -49,7 +47,7 @@ def main() -> None:
         )
         cells = []
         errors[label] = {}
-        for n in names:
+        for n in chosen:
             recs = [
                 run_synthetic(s.for_world("synthetic"), EXPERIMENTS[n], args.seed, r)
                 for r in range(args.runs)
@@ -65,9 +63,9 @@ def main() -> None:
     greedy = errors["bve greedy"]
     for label in errors:
         if label.startswith("bve H="):
-            better = [f"{n}: {100 * np.mean(errors[label][n] < greedy[n]):.0f}%" for n in names]
+            better = [f"{n}: {100 * np.mean(errors[label][n] < greedy[n]):.0f}%" for n in chosen]
             print(f"{label}: runs whose sqrt(tr P) is below the greedy BVE's: " + "; ".join(better))
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

@@ -6,9 +6,8 @@ baselines, in both measurement modes, same seeds and steps; plus honesty figures
 
 from __future__ import annotations
 
-import argparse
-
 from bve_mj.campaigns.paper import run_table
+from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import Settings, with_overrides
 from bve_mj.config.experiments import EXPERIMENTS
 
@@ -21,10 +20,10 @@ ROWS = (
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--runs", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--workers", type=int, default=2)
+    ap = ScriptParser()
+    ap.add_argument("--runs", type=integer(1), default=100)
+    ap.add_argument("--seed", type=SEED, default=0)
+    ap.add_argument("--workers", type=integer(1, 1024), default=2)
     args = ap.parse_args()
     names = ("E1", "E2", "E3", "E4", "E6", "E7", "E8", "E9")
     exps = [EXPERIMENTS[n] for n in names]
@@ -56,4 +55,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

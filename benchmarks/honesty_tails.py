@@ -16,7 +16,6 @@ wrong answer).
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 from pathlib import Path
@@ -24,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from bve_mj.campaigns.scenarios import SILENT_NEES
+from bve_mj.cli.script import ScriptParser, guarded
 from bve_mj.loop.outcomes import Outcome
 
 SUCCESS = frozenset(o.value for o in Outcome if o.success)  # a stop rule said done
@@ -62,13 +62,13 @@ def _read(path: Path) -> dict[str, list[Row]]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
+    ap = ScriptParser()
     ap.add_argument("suite_json", type=Path, help="a `bve-mj scenarios --json` file")
     args = ap.parse_args()
     try:
         scenarios = _read(args.suite_json)
     except (OSError, ValueError) as exc:
-        ap.error(f"suite_json: {args.suite_json} is not a `bve-mj scenarios --json` file ({exc})")
+        ap.error(f"suite_json: got '{args.suite_json}'; allowed: a `bve-mj scenarios --json` file ({exc})")
     print(f"{'scenario':22s} {'n':>3s} {'mean':>7s} {'median':>7s} {'filter':>7s} {'silent':>6s} "
           f"{'k':>6s} {'silent@k':>8s}")  # fmt: skip
     totals = [0, 0, 0]
@@ -93,4 +93,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guarded(main)

@@ -10,13 +10,13 @@ ignores; the README's copies in assets/ were made from these).
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import imageio.v2 as imageio
 import numpy as np
 
 from bve_mj import Settings
+from bve_mj.cli.script import SEED, ScriptParser, folder, guarded
 from bve_mj.config import with_overrides
 from bve_mj.loop.mujoco import run_mujoco_episode
 from bve_mj.reporting.video import EpisodeRecorder
@@ -41,4 +41,8 @@ def main(out_dir: str = "out", seed: int = 1) -> None:
 
 
 if __name__ == "__main__":
-    main(*(sys.argv[1:2] or ["out"]), *(int(a) for a in sys.argv[2:3]))
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out_dir", nargs="?", type=folder, default="out")
+    ap.add_argument("seed", nargs="?", type=SEED, default=1)
+    args = ap.parse_args()
+    guarded(lambda: main(args.out_dir, args.seed))

@@ -25,12 +25,12 @@ others (a box the fruit's stem or a leaf cuts is not the shape of a fruit's imag
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from bve_mj.cli.script import SEED, ScriptParser, guarded
 from bve_mj.config import load_settings
 from bve_mj.loop.mujoco import run_mujoco_episode
 from bve_mj.perception import BoxDetector
@@ -69,4 +69,8 @@ def main(seed: int = 0, scenario: str = "clean") -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 0, sys.argv[2] if len(sys.argv) > 2 else "clean")
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("seed", nargs="?", type=SEED, default=0)
+    ap.add_argument("scenario", nargs="?", default="clean", help="a scenario of the suite")
+    args = ap.parse_args()
+    guarded(lambda: main(args.seed, args.scenario))

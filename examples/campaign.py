@@ -11,11 +11,10 @@ bve-mj campaign --out out/campaign_example --experiments E1,E5 --worlds syntheti
 
 from __future__ import annotations
 
-import sys
-
 from bve_mj import Settings
 from bve_mj.campaigns.runner import run_campaign
 from bve_mj.campaigns.spec import CampaignSpec
+from bve_mj.cli.script import ScriptParser, folder, guarded, integer
 from bve_mj.reporting.campaign_report import format_cells, write_campaign_outputs
 
 
@@ -41,4 +40,8 @@ def main(out: str = "out/campaign_example", runs: int = 5) -> None:
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:2], *(int(a) for a in sys.argv[2:3]))
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", nargs="?", type=folder, default="out/campaign_example")
+    ap.add_argument("runs", nargs="?", type=integer(1), default=5)
+    args = ap.parse_args()
+    guarded(lambda: main(args.out, args.runs))

@@ -6,12 +6,11 @@ python examples/gym_policies.py [episodes] [scenario]      (needs: pip install '
 
 from __future__ import annotations
 
-import sys
-
 import gymnasium as gym
 import numpy as np
 
 import bve_mj.gym  # noqa: F401  (registers BveMj/ViewPlanning-v0)
+from bve_mj.cli.script import ScriptParser, guarded, integer
 
 
 def run(env: gym.Env, policy: str, seed: int) -> tuple[float, int, float, str]:
@@ -43,4 +42,8 @@ def main(episodes: int = 3, scenario: str = "clean") -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 3, sys.argv[2] if len(sys.argv) > 2 else "clean")
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("episodes", nargs="?", type=integer(1), default=3)
+    ap.add_argument("scenario", nargs="?", default="clean", help="a scenario of the suite")
+    args = ap.parse_args()
+    guarded(lambda: main(args.episodes, args.scenario))

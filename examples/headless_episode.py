@@ -5,11 +5,10 @@ python examples/headless_episode.py [seed]
 
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 
 from bve_mj import Settings
+from bve_mj.cli.script import SEED, ScriptParser, guarded
 from bve_mj.loop.mujoco import run_mujoco_episode
 
 
@@ -25,4 +24,6 @@ def main(seed: int = 0) -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 0)
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("seed", nargs="?", type=SEED, default=0)
+    guarded(lambda: main(ap.parse_args().seed))

@@ -5,9 +5,8 @@ python examples/paper_table.py [RUNS]   (default 20 runs per experiment)
 
 from __future__ import annotations
 
-import sys
-
 from bve_mj import EXPERIMENTS, Settings, run_table
+from bve_mj.cli.script import ScriptParser, guarded, integer
 from bve_mj.config.experiments import PAPER_RESULTS
 from bve_mj.reporting.tables import format_table
 
@@ -18,4 +17,6 @@ def main(runs: int = 20) -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 20)
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("runs", nargs="?", type=integer(1), default=20, help="runs per experiment")
+    guarded(lambda: main(ap.parse_args().runs))

@@ -9,13 +9,13 @@ eye-in-hand view.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import cv2
 import mujoco
 import numpy as np
 
+from bve_mj.cli.script import SEED, ScriptParser, folder, guarded
 from bve_mj.config import Settings
 from bve_mj.perception import Detection, Intrinsics, detect
 from bve_mj.reporting.overlay import draw_detection
@@ -68,4 +68,8 @@ def main(seed: int = 4, out_dir: str = "out") -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 4, *(sys.argv[2:3]))
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("seed", nargs="?", type=SEED, default=4)
+    ap.add_argument("out_dir", nargs="?", type=folder, default="out")
+    args = ap.parse_args()
+    guarded(lambda: main(args.seed, args.out_dir))

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 from pathlib import Path
 
 import cv2
@@ -22,6 +21,7 @@ import mujoco
 import numpy as np
 
 from bve_mj.campaigns.scenarios import load_suite
+from bve_mj.cli.script import SEED, ScriptParser, folder, guarded
 from bve_mj.geometry import camera_rotation
 from bve_mj.perception import Detection, Intrinsics, detect, ripe_mask
 from bve_mj.perception.instances import group_arcs, outline_arcs
@@ -120,5 +120,8 @@ def main(seed: int = 4, out_dir: str = "out") -> None:
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    main(int(args[0]) if args else 4, args[1] if len(args) > 1 else "out")
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("seed", nargs="?", type=SEED, default=4)
+    ap.add_argument("out_dir", nargs="?", type=folder, default="out")
+    args = ap.parse_args()
+    guarded(lambda: main(args.seed, args.out_dir))

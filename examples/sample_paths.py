@@ -8,12 +8,12 @@ extra: pip install -e ".[plots]").
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from bve_mj import EXPERIMENTS, Belief, Settings, SyntheticWorld, make_planner, run_episode
+from bve_mj.cli.script import ScriptParser, folder, guarded
 from bve_mj.config import with_overrides
 from bve_mj.loop.synthetic import sample_scenario
 from bve_mj.reporting.plots import plot_sample_paths
@@ -45,4 +45,6 @@ def main(out_dir: str = "out") -> None:
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:])
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out_dir", nargs="?", type=folder, default="out")
+    guarded(lambda: main(ap.parse_args().out_dir))

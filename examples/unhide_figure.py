@@ -16,13 +16,13 @@ Prints what the detector made of the hidden fruit in each view.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from bve_mj.campaigns.scenarios import load_suite
+from bve_mj.cli.script import SEED, ScriptParser, folder, guarded
 from bve_mj.config import with_overrides
 from bve_mj.estimation.visibility import outline_shown_deg
 from bve_mj.loop.mujoco import episode_constraints, episode_settings
@@ -104,9 +104,8 @@ def main(seed: int = 3669142227, out_dir: str = "out") -> None:
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    if len(args) > 2 or (args and not args[0].isdigit()):
-        allowed = "[EPISODE_SEED (an integer >= 0)] [OUT_DIR]"
-        print(f"unhide_figure.py: error: arguments: got {args}; allowed: {allowed}", file=sys.stderr)
-        sys.exit(2)
-    main(int(args[0]) if args else 3669142227, args[1] if len(args) > 1 else "out")
+    ap = ScriptParser(description=__doc__.splitlines()[0])
+    ap.add_argument("seed", nargs="?", type=SEED, default=3669142227, help="the episode's seed")
+    ap.add_argument("out_dir", nargs="?", type=folder, default="out")
+    args = ap.parse_args()
+    guarded(lambda: main(args.seed, args.out_dir))
