@@ -505,7 +505,9 @@ def test_converged_needs_an_answer_that_rests_on_no_single_view():
     assert result.views[2].belief.sigma_max_m < 1e-3  # the plain rule's stop, held back
 
     loop = EpisodeLoop(_Axes(truth, axes), prior, FilterConfig(process_sigma_m=0.0), _Still())
+    assert loop.leave_one_out() == []
     loop.start()
+    assert [b.sigma_max_m for b in loop.leave_one_out()] == [prior.sigma_max_m]  # one view: the prior
     for i in range(1, 4):
         if i == 3:  # views 0-2: without view 0, x is the prior's
             assert loop.leave_one_out()[0].sigma_max_m > 0.01 > loop.leave_one_out()[1].sigma_max_m

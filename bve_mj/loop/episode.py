@@ -204,11 +204,9 @@ class EpisodeLoop:
     def leave_one_out(self) -> list[Belief]:
         """What the episode would claim now with each measurement fused since the last belief
         reset left out in turn (the others fused again from the prior, in their order; the
-        claim's innovation and refusal scales as they are): the claims no single view shaped.
-        Empty with fewer than two such measurements."""
+        claim's innovation and refusal scales as they are): the claims no single view shaped
+        (the prior's, where one measurement is all there is). Empty before the first."""
         accepted, claims = self._accepted, self.claims
-        if len(accepted) < 2:
-            return []
         out = []
         for k in range(len(accepted)):
             others = accepted[:k] + accepted[k + 1 :]
