@@ -44,8 +44,8 @@ def main() -> None:
     }
     cases = {
         "synthetic": CampaignSpec(runs=args.synthetic_runs),
-        "mujoco": CampaignSpec(**mujoco),  # type: ignore[arg-type]
-        "paired": CampaignSpec(planners=("bve", "random", "circle"), **mujoco),  # type: ignore[arg-type]
+        "mujoco": CampaignSpec(**mujoco),
+        "paired": CampaignSpec(planners=("bve", "random", "circle"), **mujoco),
     }
     chosen = [c.strip() for c in args.cases.split(",") if c.strip()]
     unknown = [c for c in chosen if c not in cases]

@@ -64,7 +64,8 @@ def main() -> None:
                 "false_positives": args.false_positives,
             },
         )
-        errors, views, detect_ms, outcomes = [], [], [], Counter()
+        errors, views, detect_ms = [], [], []
+        outcomes: Counter[str] = Counter()
         t0 = time.perf_counter()
         for s in seeds:
             ep = run_mujoco_episode(settings, s)

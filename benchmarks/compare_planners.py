@@ -11,7 +11,7 @@ from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import Settings, with_overrides
 from bve_mj.config.experiments import EXPERIMENTS
 
-ROWS = (
+ROWS: tuple[tuple[str, dict[str, object]], ...] = (
     ("bve/consistent", {"kind": "bve", "planning_model": "consistent"}),
     ("bve/paper", {"kind": "bve", "planning_model": "paper"}),
     ("random", {"kind": "random"}),
