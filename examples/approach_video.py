@@ -32,7 +32,7 @@ def main(out_dir: str = "out", seed: int = 1) -> None:
     print(f"outcome {episode.result.outcome}, final error {episode.final_error_mm:.2f} mm")
     print(f"wrote {out} ({frames} frames)")
     reader = imageio.get_reader(out)
-    all_frames = [f for f in reader]
+    all_frames = list(reader.iter_data())
     picks = [all_frames[int(i)][::2, ::2] for i in np.linspace(0, len(all_frames) - 1, 4)]
     still = np.vstack([np.hstack(picks[:2]), np.hstack(picks[2:])])
     png = out.with_name(out.stem + "_frames.png")

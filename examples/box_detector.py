@@ -39,7 +39,9 @@ from bve_mj.perception import BoxDetector
 def my_boxes(image_rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Your detector: boxes of the red blobs (confidence: how much of its box a blob fills)."""
     hsv = cv2.cvtColor(image_rgb, cv2.COLOR_RGB2HSV)
-    red = cv2.inRange(hsv, (0, 110, 40), (8, 255, 255)) | cv2.inRange(hsv, (170, 110, 40), (180, 255, 255))
+    low = cv2.inRange(hsv, (0, 110, 40), (8, 255, 255))  # red wraps around hue 0
+    high = cv2.inRange(hsv, (170, 110, 40), (180, 255, 255))
+    red = cv2.bitwise_or(low, high)
     n, _, stats, _ = cv2.connectedComponentsWithStats(red)
     boxes, conf = [], []
     for x, y, w, h, area in stats[1:n]:

@@ -11,6 +11,7 @@ import numpy as np
 
 import bve_mj.gym  # noqa: F401  (registers BveMj/ViewPlanning-v0)
 from bve_mj.cli.script import ScriptParser, guarded, integer
+from bve_mj.gym.env import ViewPlanningEnv
 
 
 def run(env: gym.Env, policy: str, seed: int) -> tuple[float, int, float, str]:
@@ -19,7 +20,9 @@ def run(env: gym.Env, policy: str, seed: int) -> tuple[float, int, float, str]:
     env.action_space.seed(seed)
     total, views = 0.0, 0
     while True:  # the env truncates at the view budget
-        action = env.unwrapped.planner_action() if policy == "bve" else env.action_space.sample()
+        inner = env.unwrapped
+        assert isinstance(inner, ViewPlanningEnv)
+        action = inner.planner_action() if policy == "bve" else env.action_space.sample()
         _, reward, terminated, truncated, info = env.step(action)
         total, views = total + float(reward), views + 1
         if terminated or truncated:
@@ -36,8 +39,8 @@ def main(episodes: int = 3, scenario: str = "clean") -> None:
             print(
                 f"{policy:6} seed {seed}: return {ret:7.2f}, {views:2d} views, error {err:6.2f} mm, {ending}"
             )
-        ret, views, err = (np.mean([r[i] for r in rows]) for i in range(3))
-        print(f"{policy:6} mean: return {ret:7.2f}, {views:4.1f} views, error {err:6.2f} mm")
+        mean_ret, mean_views, mean_err = (float(np.mean([r[i] for r in rows])) for i in range(3))
+        print(f"{policy:6} mean: return {mean_ret:7.2f}, {mean_views:4.1f} views, error {mean_err:6.2f} mm")
     env.close()
 
 

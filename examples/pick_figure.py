@@ -44,8 +44,8 @@ def main(seed: int = 9105, out_dir: str = "out") -> None:
     taken = [m.fruit for m in matches if m.localised_within(5.0)]
     missed = [m.fruit for m in matches if not m.localised_within(5.0)]
     if not taken or not missed:
-        found = f"the survey localised {len(taken)} of {len(matches)}"
-        raise SystemExit(f"episode seed {seed}: {found} ripe fruit: none hidden behind the others to show")
+        localised = f"the survey localised {len(taken)} of {len(matches)} ripe fruit"
+        raise SystemExit(f"episode seed {seed}: {localised}: none hidden behind the others to show")
     s = episode_settings(every)
     start = start_episode(s, seed)
     assert start.q_start is not None  # the survey ran: the arm has a ready pose

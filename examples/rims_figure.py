@@ -22,8 +22,9 @@ import numpy as np
 
 from bve_mj.campaigns.scenarios import load_suite
 from bve_mj.cli.script import SEED, ScriptParser, folder, guarded
+from bve_mj.config import DetectorConfig, Settings
 from bve_mj.geometry import camera_rotation
-from bve_mj.perception import Detection, Intrinsics, detect, ripe_mask
+from bve_mj.perception import Detection, Intrinsics, NoDetection, detect, ripe_mask
 from bve_mj.perception.instances import group_arcs, outline_arcs
 from bve_mj.perception.rims import interior_arcs, interior_edges
 from bve_mj.robot import ArmKinematics, get_robot
@@ -32,7 +33,15 @@ from bve_mj.sim.scene import build_scene, set_probe_pose
 from bve_mj.sim.scene_model import PROBE_CAMERA
 
 
-def _panel(image, intr, s, cfg, centre_px, radius_px, predicted):
+def _panel(
+    image: np.ndarray,
+    intr: Intrinsics,
+    s: Settings,
+    cfg: DetectorConfig,
+    centre_px: np.ndarray,
+    radius_px: float,
+    predicted: np.ndarray,
+) -> tuple[np.ndarray, Detection | NoDetection]:
     """The image around the target with the arcs of the fruit nearest the truth, the fitted
     circle and the true silhouette; and the detection."""
     det = detect(image, intr, s.fruit, s.measurement, cfg, predicted)
@@ -61,7 +70,7 @@ def _panel(image, intr, s, cfg, centre_px, radius_px, predicted):
     return cv2.resize(crop, (360, 360), interpolation=cv2.INTER_NEAREST), det
 
 
-def _say(det, centre_px, radius_px) -> str:
+def _say(det: Detection | NoDetection, centre_px: np.ndarray, radius_px: float) -> str:
     if not isinstance(det, Detection):
         return f"refused: {det.reason}"
     off = float(np.linalg.norm(det.centre_px - centre_px))
