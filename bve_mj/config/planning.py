@@ -132,7 +132,11 @@ class PlannerConfig:
     )
     starts: int = field(
         default=2,
-        metadata=_why("local optimisations per plan, from the best-scoring of 15 seed points"),
+        metadata=_why(
+            "local optimisations per plan, from the best-scoring of 15 seed points: the BVE without "
+            "the arm, or with it under robot.formulation = cartesian; the joint formulation (the "
+            "default with the arm) starts from the arm's configuration instead and ignores this"
+        ),
     )
     joint_margin_weight: float = field(
         default=1.0,
