@@ -86,13 +86,14 @@ INT_MAXIMA = {
 MAX_RUNS = 100_000
 
 
-def int_arg(name: str, text: str | None, minimum: int) -> int | None:
-    """The integer option ``name`` (None when not given), within [minimum, its maximum]."""
+def int_arg(name: str, text: str | None, minimum: int, maximum: int | None = None) -> int | None:
+    """The integer option ``name`` (None when not given), within [minimum, maximum] (default
+    its maximum in :data:`INT_MAXIMA`)."""
     from bve_mj.errors import ConfigError
 
     if text is None:
         return None
-    maximum = INT_MAXIMA.get(name, MAX_RUNS)
+    maximum = INT_MAXIMA.get(name, MAX_RUNS) if maximum is None else maximum
     allowed = f"an integer in [{minimum}, {maximum}]"
     try:
         value = int(text)

@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import NoReturn, TypeVar
 
-from bve_mj.cli.args import EXIT_USAGE, MAX_RUNS
+from bve_mj.cli.args import EXIT_USAGE, MAX_RUNS, int_arg
 
 __all__ = ["SEED", "ScriptParser", "folder", "guarded", "integer", "integers", "names", "number"]
 
@@ -37,12 +37,13 @@ def integer(minimum: int, maximum: int = MAX_RUNS) -> Callable[[str], int]:
     not a run that never ends)."""
 
     def parse(text: str) -> int:
+        from bve_mj.errors import ConfigError
+
         try:
-            value = int(text)
-        except ValueError:
-            value = None
-        if value is None or not minimum <= value <= maximum:
-            raise argparse.ArgumentTypeError(f"got {text!r}; allowed: an integer in [{minimum}, {maximum}]")
+            value = int_arg("", text, minimum, maximum)
+        except ConfigError as exc:
+            raise argparse.ArgumentTypeError(f"got {text!r}; allowed: {exc.allowed}") from None
+        assert value is not None
         return value
 
     return parse

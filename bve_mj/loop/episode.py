@@ -159,7 +159,6 @@ class EpisodeLoop:
         self._accepted: list[Observation] = []  # the measurements fused since the last belief reset
         self._innovations: list[tuple[float, int]] = []  # (NIS, dimension) of the accepted, since a reset
         self._fused: list[np.ndarray] = []  # unit directions estimate → camera of the accepted, since a reset
-        self._refused_share = 0.0  # of the views so far, as the last claim counted it
         self._reporting = world if isinstance(world, ReportsViews) else None  # asked once, not at each
         self._encoders = world if isinstance(world, ReadsEncoders) else None  # view: ~0.1 ms a check
 
@@ -215,7 +214,8 @@ class EpisodeLoop:
                 belief = self._update(belief, obs.z, obs.model, None).belief
             if claims is not None:
                 outlines = [o.outline for o in others]
-                belief = claims.claim(belief, self._innovations, self._refused_share, outlines)
+                refused = sum(not v.measured for v in self.views) / len(self.views)  # as the last claim
+                belief = claims.claim(belief, self._innovations, refused, outlines)
             out.append(belief)
         return out
 
@@ -274,7 +274,6 @@ class EpisodeLoop:
             claimed = belief
         else:  # the share of the views so far, this one included, in which nothing was measured
             refused = (sum(not v.measured for v in views) + (not measured)) / (len(views) + 1)
-            self._refused_share = refused
             outlines = [o.outline for o in self._accepted]
             claimed = self.claims.claim(belief, innovations, refused, outlines)
         views.append(
