@@ -39,6 +39,7 @@ BAD = {
     "benchmarks/bench_gym.py": (["--steps", "0"], "--steps"),
     "benchmarks/bench_harvest.py": (["--planner", "greedy"], "--planner"),
     "benchmarks/bench_ik.py": (["--targets", "10000000"], "--targets"),
+    "benchmarks/bench_instances.py": (["--views", "0"], "--views"),
     "benchmarks/bench_kinematic.py": (["--runs", "0"], "--runs"),
     "benchmarks/bench_perception.py": (["--views", "-3"], "--views"),
     "benchmarks/bench_planning.py": (["--optimisers", "adam"], "--optimisers"),
