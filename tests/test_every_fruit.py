@@ -433,7 +433,8 @@ def test_a_one_target_move_into_the_fruit_it_localises_is_refused_and_the_loop_h
     (σ 5 cm) is no obstacle while searching, but in approach mode the canopy stands 3σ
     nearer from the start (where its untracked neighbours may hang) and only the hand may
     enter it; a plan without joint angles passes unchecked; what the loop tells the planner
-    reaches the one inside."""
+    reaches the one inside, and a planner that learns from failed views is told the blocked
+    one (else it plans the same blocked move again from the same belief)."""
     import mujoco
 
     from bve_mj.errors import PlanningError
@@ -462,6 +463,14 @@ def test_a_one_target_move_into_the_fruit_it_localises_is_refused_and_the_loop_h
         def set_configuration(self, q):
             self.q = q
 
+    class Learning(Inner):
+        def __init__(self):
+            super().__init__()
+            self.failed = []
+
+        def note_failed_view(self, p_world_camera, p_world_target):
+            self.failed.append((p_world_camera.copy(), p_world_target.copy()))
+
     def fruit_at(dx, sigma=0.001):
         centre = np.array([hand1 + dx, reached[1], reached[2]])
         return Belief(np.r_[centre, 0.03], np.diag([sigma**2] * 3 + [1e-6]))
@@ -478,6 +487,14 @@ def test_a_one_target_move_into_the_fruit_it_localises_is_refused_and_the_loop_h
     assert ClearMovesPlanner(Inner(None), world, 0.03).plan(fruit_at(0.02), np.zeros(3), 3).q is None
     planner.set_configuration(q0)
     assert planner.planner.q is q0
+    learning = ClearMovesPlanner(Learning(), world, 0.03)
+    with pytest.raises(PlanningError):
+        learning.plan(fruit_at(0.02), np.zeros(3), 3)
+    ((camera, target),) = learning.planner.failed  # the blocked view, to plan elsewhere next
+    np.testing.assert_allclose(camera, reached)
+    np.testing.assert_allclose(target, fruit_at(0.02).centre_m)
+    learning.plan(fruit_at(0.1), np.zeros(3), 3)
+    assert len(learning.planner.failed) == 1  # a clear move is no failure
 
 
 def test_baselines_take_only_views_whose_moves_keep_clear():

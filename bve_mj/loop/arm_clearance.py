@@ -172,7 +172,11 @@ class ClearMovesPlanner(PlannerAround):
     (known or loose), and the hand (flange and camera) may enter it, as a harvest's approach
     does, the rest of the arm not. A plan whose move is not clear raises
     :class:`~bve_mj.errors.PlanningError`, and the loop holds the camera (event
-    ``planner_failed``). A plan without joint angles is passed on unchecked."""
+    ``planner_failed``); the planner is told the view it planned failed (where it learns
+    from failed views), or it would plan the same blocked move from the same belief again,
+    view after view: a camera held where the last view was learns nothing new to change it
+    (``plum`` 4148988863: ten views held so, the episode 12 mm off at its end). A plan
+    without joint angles is passed on unchecked."""
 
     def __init__(self, planner: Planner, world: MujocoWorld, radius_m: float, approach: bool = False) -> None:
         super().__init__(planner)
@@ -193,6 +197,7 @@ class ClearMovesPlanner(PlannerAround):
         q_now, hand = self.world.q, not self.approach
         clear = path_clearance(self.world, q_now, plan.q, known.spheres, canopy, hand=hand)
         if clear < PATH_CLEARANCE_M:
+            self.note_failed_view(plan.p_world_camera, plan.p_world_target)  # plan elsewhere next
             raise PlanningError(
                 f"view {iteration}: the move passes {-1e3 * clear:.0f} mm into the fruit or the canopy"
             )
