@@ -36,7 +36,7 @@ from bve_mj.loop.stops import SETTLE_DEG
 SCENES = "ripe_truss,truss_chain,truss_cluster,cherry_truss,plant_trusses"
 
 
-def standing_dispute(innovations: list[tuple[float, int]], directions: list[np.ndarray]) -> float | None:
+def standing_dispute(innovations: list[tuple[float, float]], directions: list[np.ndarray]) -> float | None:
     """The NIS of the dispute standing on a track at the end, or None."""
     limit, cos_settle = float(chi2_quantile(0.999, 3)), math.cos(math.radians(SETTLE_DEG))
     standing: tuple[float, np.ndarray] | None = None
@@ -57,7 +57,7 @@ def main() -> None:
     ap.add_argument("--episodes", type=integer(1), default=20)
     ap.add_argument("--only", default=SCENES)
     args = ap.parse_args()
-    history: dict[int, tuple[list[tuple[float, int]], list[np.ndarray]]] = {}
+    history: dict[int, tuple[list[tuple[float, float]], list[np.ndarray]]] = {}
     claimed = every_fruit.claimed
 
     def keeping(track: Any, *a: Any, **k: Any) -> Any:

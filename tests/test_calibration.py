@@ -310,7 +310,7 @@ def test_episode_with_a_bad_noise_model_exits_2_naming_it(tmp_path, capsys, cont
 def test_calibrate_renders_real_detections_and_writes_a_loadable_model(tmp_path, capsys):
     out, rows = tmp_path / "model.json", tmp_path / "rows.json"
     argv = ["calibrate", "--only", "clean", "--scenes", "3", "--views", "9", "--seed", "5", "--workers", "1"]
-    assert main([*argv, "--out", str(out), "--json", str(rows), "--quiet"]) == 0
+    assert main([*argv, "--twin-views", "6", "--out", str(out), "--json", str(rows), "--quiet"]) == 0
     model = load_noise_model(str(out))
     model.check_camera(CameraConfig(), str(out))
     doc = json.loads(rows.read_text())
@@ -319,7 +319,12 @@ def test_calibrate_renders_real_detections_and_writes_a_loadable_model(tmp_path,
     # a lone red fruit seen whole: the centre within a pixel, the radius' bias negative
     assert np.median([abs(r["err_u_px"]) for r in detected]) < 1.0
     assert model.radius_bias(60.0) < 0.0
-    assert "wrote" in capsys.readouterr().out
+    # twins from cameras 0-40 mm away: views from one place share more than their direction says
+    for corr in (model.centre_correlation, model.radius_correlation):
+        assert 0.0 < corr.nearby <= 0.99 and 1e-3 < corr.length_m < 1.0
+    assert "twin pairs" in model.source
+    printed = capsys.readouterr().out
+    assert "wrote" in printed and "views from one place share more" in printed
 
 
 @pytest.mark.parametrize(
@@ -328,6 +333,7 @@ def test_calibrate_renders_real_detections_and_writes_a_loadable_model(tmp_path,
         (["calibrate", "--scenes", "0"], "scenes"),
         (["calibrate", "--views", "x"], "views"),
         (["calibrate", "--out", "model.txt"], "out"),
+        (["calibrate", "--twin-views", "-1"], "twin_views"),
         (["calibrate", "--only", "nowhere"], "only"),
         (["episode", "--filter", "kalman"], "filter.kind"),
         (["episode", "--state", "position"], "filter.state"),

@@ -297,13 +297,16 @@ def test_the_fused_dispersion_is_the_composed_one(bearing, failed, taken, rng):
     from bve_mj.planning.information import information_lazy
     from bve_mj.planning.losses import _dispersion
 
-    corr = (ViewCorrelation(0.5, 0.03), ViewCorrelation(0.3, 0.05))
+    corr = (ViewCorrelation(0.5, 0.03, 0.7, 0.02), ViewCorrelation(0.3, 0.05, 0.8, 0.03))
     for i in range(40):
         c, x = random_state_pair(rng, 4)
         e = (c - x[:3]) / np.linalg.norm(c - x[:3])
         near = [e + rng.normal(0.0, 0.2, 3) for _ in range(3)]
         directions = np.array([d / np.linalg.norm(d) for d in near])
-        info = SizeInformation((2e-7, 1e-9), (1e-7, 2e-9), bearing, directions if taken else None, corr)
+        at = c + rng.normal(0.0, 0.015, (3, 3))  # cameras close by: the nearby part counts
+        info = SizeInformation(
+            (2e-7, 1e-9), (1e-7, 2e-9), bearing, directions if taken else None, corr, at if taken else None
+        )
         if failed:
             info = FailedViewDiscount(info, directions[:2], math.radians(25.0))
         Lo = np.linalg.inv(random_spd_n(rng, 4))

@@ -46,6 +46,7 @@ BAD = {
     "benchmarks/bench_table.py": (["--runs", "0"], "--runs"),
     "benchmarks/bench_unmeasured.py": (["--only", "no_such_scene"], "no_such_scene"),
     "benchmarks/bench_upright.py": (["--episodes", "0"], "--episodes"),
+    "benchmarks/bench_view_twins.py": (["--scenes", "0"], "--scenes"),
     "benchmarks/compare_horizon.py": (["--horizons", "1,9"], "--horizons"),
     "benchmarks/compare_planners.py": (["--seed", "x"], "--seed"),
     "benchmarks/honesty_tails.py": (["no_such_file.json"], "suite_json"),

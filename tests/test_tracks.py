@@ -339,6 +339,33 @@ def test_views_of_a_held_camera_are_one_viewpoint_and_do_not_confirm_a_track():
     assert track.confirmed and len(track.viewpoints) == 3
 
 
+def test_a_held_camera_adds_to_a_track_only_the_share_its_repeats_hold():
+    """The tracker fuses a view as the share it adds beside the track's views, the cameras'
+    places counted (:mod:`bve_mj.estimation.view_correlation`): three more sightings from the
+    camera held where it was (the encoders' jitter apart) shrink the track's covariance only
+    a little, where counted by their directions alone they would shrink it by half a fresh
+    view's worth each; the track keeps each view's camera position."""
+    from bve_mj.estimation.view_correlation import ViewCorrelation
+
+    by_place = (ViewCorrelation(0.3, 0.03, 0.85, 0.01), ViewCorrelation(0.35, 0.12, 0.83, 0.014))
+    by_direction = tuple(ViewCorrelation(c.weight, c.width) for c in by_place)
+    fruit = np.array([0.45, 0.0, 0.3])
+    p, R = _views(9)[4]
+    shrunk = []
+    for corr in (by_place, by_direction):
+        cfg = TrackingConfig(fruits="all", zone_m=0.2)
+        tracker = Tracker(cfg, fruit, (0.03, 0.003), UPDATE, _visible(), correlation=corr)
+        volumes = []
+        for v in range(4):
+            at = p + np.array([0.0, 1e-4 * v, 0.0])
+            tracker.step([Sighting(_z(fruit, 0.03, at, R), _model(at, R))], _model(at, R), v)
+            volumes.append(np.linalg.det(tracker.tracks[0].belief.cov[:3, :3]))
+        (track,) = tracker.tracks
+        assert len(track.cameras) == len(track.directions) == 4
+        shrunk.append(volumes[-1] / volumes[0])
+    assert shrunk[0] > 0.7 and shrunk[1] < 0.3  # ~(1 + 3Δ)^-k: Δ ≈ 0.07 held, 0.5 by direction
+
+
 def test_two_sightings_of_one_fruit_from_far_apart_views_make_one_track():
     """Two tentative tracks of one fruit cross at it: merged into one (confirmed) track whose
     belief is their information added (the radius prior once)."""

@@ -353,11 +353,16 @@ def calibrate(
     progress: Callable[[int, int], None] | None = None,
     every_fruit: bool = False,
     drawn: Sequence[Scenario] = (),
+    twin_views: int = 2,
 ) -> tuple[NoiseModel, dict[str, Any], CalibrationData]:
     """Render and detect (:func:`run_calibration`), then fit the noise model
-    (:func:`~bve_mj.estimation.noise_fit.fit_noise_model`): the model, how well it describes the
-    samples, and the samples. The default seed (1) keeps the scenario suite's episodes
+    (:func:`~bve_mj.estimation.noise_fit.fit_noise_model`) and, from ``twin_views`` views of
+    each scene and their twins, the part nearby views share
+    (:func:`~bve_mj.campaigns.twin_views.fit_twins`; 0: none): the model, how well it describes
+    the samples, and the samples. The default seed (1) keeps the scenario suite's episodes
     (seeds 0 and 7777 there) out of the calibration."""
+    from bve_mj.campaigns.twin_views import fit_twins
+
     data = run_calibration(
         scenarios, scenes=scenes, views=views, seed=seed, workers=workers, progress=progress,
         every_fruit=every_fruit, drawn=drawn,
@@ -383,4 +388,10 @@ def calibrate(
     report["refused"] = sum(not r.get("detected") for r in target)
     report["every_fruit_detections"] = sum(bool(r.get("detected")) for r in every)
     report["every_fruit_refused"] = len(every) - report["every_fruit_detections"]
+    if twin_views:
+        cores = workers if workers is not None else os.cpu_count() or 1
+        model, table, pairs = fit_twins(
+            model, scenarios, scenes=scenes, views=twin_views, seed=seed, workers=cores
+        )
+        report["twins"] = {"views": twin_views, "pairs": pairs, "table": [t._asdict() for t in table]}
     return model, report, data

@@ -247,6 +247,12 @@ def build_parser() -> argparse.ArgumentParser:
         "all): their errors fit the views' outlier tail the tracker fuses with (the model "
         "itself is the target's)",
     )
+    cal.add_argument(
+        "--twin-views",
+        default="2",
+        help="views per scene that also get twins from cameras 0-40 mm away: how the views from one "
+        "place share their errors (a camera that holds learns nothing new); 0: none (default 2)",
+    )
     cal.add_argument("--quiet", action="store_true", help="no progress on stderr")
     res = sub.add_parser(
         "results",

@@ -182,6 +182,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise ConfigError("out", args.out, "a path ending in .json")
     json_path = check_output_path("json", args.json)
     drawn_count = int_arg("drawn", args.drawn, 0) or 0
+    twin_views = int_arg("twin_views", args.twin_views, 0) or 0
     suite = load_suite(args.dir, args.only.split(",") if args.only is not None else None)
     also = f" + {drawn_count} drawn scenes (draw seed {seed}) x 1 scene" if drawn_count else ""
     print(
@@ -193,7 +194,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         drawn = load_suite(write_drawn_scenes(folder, drawn_count, seed)[0].parent) if drawn_count else []
         model, report, data = calibrate(
             suite, scenes=scenes, views=views, seed=seed, workers=workers, progress=progress_printer(show),
-            every_fruit=args.every_fruit, drawn=drawn,
+            every_fruit=args.every_fruit, drawn=drawn, twin_views=twin_views,
         )  # fmt: skip
     neighbours = (
         f"its neighbours (the every-fruit detector): {report['every_fruit_detections']} measured, "
@@ -223,6 +224,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         f"{rc.weight:.2f} (radius) at 0°, half of it at {cc.half_angle_deg():.0f}° and "
         f"{rc.half_angle_deg():.0f}° (a repeated view counts as the share it adds)"
     )
+    twins = report.get("twins")
+    if twins is not None and len(twins["table"]) < 3:
+        print(f"views from one place: {twins['pairs']} twin pairs, too few to fit (counted by direction)")
+    elif twins is not None:
+        cc, rc = model.centre_correlation, model.radius_correlation
+        print(
+            f"views from one place share more: {twins['pairs']} twin pairs, nearby share "
+            f"{cc.nearby:.2f} (centre), {rc.nearby:.2f} (radius), over {1e3 * cc.length_m:.0f} and "
+            f"{1e3 * rc.length_m:.0f} mm (a camera that holds learns almost nothing new)"
+        )
     print(
         f"a fruit the detector refuses errs more: variance × exp({model.refusal_scale:.2f} · refused share) "
         f"({report.get('refusal_fruits', 0)} fruits; scales the claimed covariance)"

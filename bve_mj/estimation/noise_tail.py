@@ -102,6 +102,7 @@ def tail_scale(
             info, grad = prior_info.copy(), np.zeros(4)
             taken: list[np.ndarray] = []
             terms: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+            dof = 0.0  # each view's as the share it adds (shared_dof), as the loop counts them
             for r in drawn:
                 p = np.asarray(r["camera_position_m"], dtype=float)
                 sc, sr = sigmas_px(r)
@@ -110,10 +111,12 @@ def tail_scale(
                 )
                 cov = np.diag([sc**2, sc**2, sr**2]) / focal_px**2
                 direction = (p - truth) / np.linalg.norm(p - truth)
+                cs = rs = 1.0
                 if taken:
                     cs = new_view_share(model.centre_correlation, np.array(taken), direction)[0]
                     rs = new_view_share(model.radius_correlation, np.array(taken), direction)[0]
                     cov = cov / np.outer(np.sqrt([cs, cs, rs]), np.sqrt([cs, cs, rs]))
+                dof += 2.0 * cs + rs
                 taken.append(direction)
                 H = BearingSizeModel(p, np.asarray(r["camera_rotation"], dtype=float), cov).jacobian(x)
                 W = np.linalg.inv(cov)
@@ -125,7 +128,7 @@ def tail_scale(
             cost = float(dx @ prior_info @ dx) + sum(
                 float((z - H @ dx) @ W @ (z - H @ dx)) for H, W, z in terms
             )
-            s2 = (INNOVATION_PRIOR_DOF + cost) / (INNOVATION_PRIOR_DOF + 3 * len(drawn))
+            s2 = (INNOVATION_PRIOR_DOF + cost) / (INNOVATION_PRIOR_DOF + dof)
             outlines = [Outline(float(r.get("neighbour_share", 0.0))) for r in drawn]
             claim = (P[:3, :3] * s2 + model.centre_offset_cov(radius, shape_index, outlines)) * refusal
             nees[-1].append(float(dx[:3] @ np.linalg.solve(claim, dx[:3])))

@@ -69,6 +69,7 @@ def merge_duplicates(
                 keep.confirmed = keep.confirmed or drop.confirmed or len(keep.viewpoints) >= confirm_hits
                 keep.innovations += drop.innovations
                 keep.directions += drop.directions
+                keep.cameras += drop.cameras
                 keep.last_view = max(keep.last_view, drop.last_view)
                 tracks.remove(drop)
                 merges.append((drop.id, keep.id))

@@ -54,7 +54,7 @@ from bve_mj.estimation.ekf import UpdateResult, nis_threshold
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.outliers import OutlierMixture, mixture_update
 from bve_mj.estimation.track_merge import merge_duplicates
-from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
+from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share, shared_dof
 from bve_mj.geometry import unit
 
 __all__ = ["Sighting", "Track", "TrackEvent", "Tracker", "ViewTracking", "assign", "belief_from_detection"]
@@ -84,6 +84,8 @@ class Track:
         innovations: (NIS, dimension) of its assigned detections after the first.
         directions: unit directions fruit → camera of the views fused, for the correlation of
             views from nearby directions (the first's included).
+        cameras: the camera positions of those views [m], for the part views from nearby
+            places share.
         views: the views whose detections it holds.
         viewpoints: the camera positions of those views, those within
             :data:`SAME_VIEWPOINT_M` of an earlier one left out [m].
@@ -98,8 +100,9 @@ class Track:
     failed: int = 0
     expected: int = 0
     confirmed: bool = False
-    innovations: list[tuple[float, int]] = field(default_factory=list)
+    innovations: list[tuple[float, float]] = field(default_factory=list)
     directions: list[np.ndarray] = field(default_factory=list)
+    cameras: list[np.ndarray] = field(default_factory=list)
     views: set[int] = field(default_factory=set)
     viewpoints: list[np.ndarray] = field(default_factory=list)
 
@@ -318,10 +321,12 @@ class Tracker:
     def _fuse(self, t: Track, s: Sighting, view: int, events: list[TrackEvent]) -> None:
         model = s.model
         direction = unit(model.p_world_camera - t.centre_m)
+        camera = np.asarray(model.p_world_camera, dtype=float).copy()
+        centre_share = radius_share = 1.0  # a fresh view's
         if self._correlation is not None and t.directions:
-            taken = np.array(t.directions)
-            centre_share = new_view_share(self._correlation[0], taken, direction)[0]
-            radius_share = new_view_share(self._correlation[1], taken, direction)[0]
+            taken, at = np.array(t.directions), np.array(t.cameras)
+            centre_share = new_view_share(self._correlation[0], taken, direction, at, camera)[0]
+            radius_share = new_view_share(self._correlation[1], taken, direction, at, camera)[0]
             model = discounted(model, centre_share, radius_share)  # type: ignore[assignment]
         result, _ = mixture_update(self._update, t.belief, s.z, model, self.outliers)
         t.belief = result.belief
@@ -329,8 +334,9 @@ class Tracker:
         t.views.add(view)
         t.note_viewpoint(s.model.p_world_camera)
         t.last_view = view
-        t.innovations.append((result.nis, 3))
+        t.innovations.append((result.nis, shared_dof(model, 3, centre_share, radius_share)))
         t.directions.append(direction)
+        t.cameras.append(camera)
         events.append(TrackEvent("updated", t.id))
         if not t.confirmed and len(t.viewpoints) >= self.config.confirm_hits:
             t.confirmed = True
@@ -354,6 +360,7 @@ class Tracker:
             return None
         t = Track(self._next_id, belief, view, view, confirmed=cfg.confirm_hits <= 1, views={view})
         t.directions.append(unit(s.model.p_world_camera - belief.centre_m))
+        t.cameras.append(np.asarray(s.model.p_world_camera, dtype=float).copy())
         t.note_viewpoint(s.model.p_world_camera)
         self._next_id += 1
         self.tracks.append(t)
@@ -361,7 +368,7 @@ class Tracker:
 
     def snapshot(self) -> tuple[Track, ...]:
         """Copies of the tracks (for records: later views do not change them)."""
-        copies = {"innovations": list, "directions": list, "views": set, "viewpoints": list}
+        copies = {"innovations": list, "directions": list, "cameras": list, "views": set, "viewpoints": list}
         return tuple(
             dataclasses.replace(t, **{k: make(getattr(t, k)) for k, make in copies.items()})
             for t in self.tracks

@@ -85,8 +85,10 @@ class Claims:
             partial(noise.centre_offset_cov, fruit_radius_m, shape_index),
         )
 
-    def scale(self, innovations: Sequence[tuple[float, int]]) -> float:
-        """s² for these (NIS, dimension) pairs (1 without innovation scaling)."""
+    def scale(self, innovations: Sequence[tuple[float, float]]) -> float:
+        """s² for these (NIS, degrees of freedom) pairs: each view's dimension, or the share
+        of it a view correlated with those before adds (:func:`~bve_mj.estimation.
+        view_correlation.shared_dof`) (1 without innovation scaling)."""
         if self.innovation_prior_dof is None:
             return 1.0
         nu = self.innovation_prior_dof
@@ -95,7 +97,7 @@ class Claims:
     def claim(
         self,
         belief: Belief,
-        innovations: Sequence[tuple[float, int]],
+        innovations: Sequence[tuple[float, float]],
         refused_share: float = 0.0,
         outlines: Sequence[Outline | None] | None = None,
     ) -> Belief:

@@ -14,7 +14,7 @@ from bve_mj.config import FilterConfig
 from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation import Belief, UpdateResult, filter_update, predict
 from bve_mj.estimation.prior_bound import PriorBound
-from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share
+from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share, shared_dof
 from bve_mj.geometry import unit
 from bve_mj.loop.claims import Claims
 from bve_mj.loop.events import Event
@@ -157,8 +157,9 @@ class EpisodeLoop:
         self._rejected: list[Observation] = []  # gated-out measurements since the last accepted one
         self._contested: list[Observation] = []  # gated-out measurements since the last belief reset
         self._accepted: list[Observation] = []  # the measurements fused since the last belief reset
-        self._innovations: list[tuple[float, int]] = []  # (NIS, dimension) of the accepted, since a reset
+        self._innovations: list[tuple[float, float]] = []  # (NIS, shared_dof) of the accepted, since a reset
         self._fused: list[np.ndarray] = []  # unit directions estimate → camera of the accepted, since a reset
+        self._fused_at: list[np.ndarray] = []  # and the camera positions they were taken from [m]
         self._reporting = world if isinstance(world, ReportsViews) else None  # asked once, not at each
         self._encoders = world if isinstance(world, ReadsEncoders) else None  # view: ~0.1 ms a check
 
@@ -229,11 +230,13 @@ class EpisodeLoop:
         looked_at = belief.centre_m
         obs = world.observe(belief)
         measured, accepted, nis = obs is not None, False, float("nan")
-        direction = unit(world.p_world_camera - belief.centre_m)
+        camera = np.asarray(world.p_world_camera, dtype=float).copy()
+        direction = unit(camera - belief.centre_m)
+        centre_share = radius_share = 1.0  # a fresh view's
         if obs is not None and correlation is not None and fused:
-            taken = np.array(fused)
-            centre_share = new_view_share(correlation[0], taken, direction)[0]
-            radius_share = new_view_share(correlation[1], taken, direction)[0]
+            taken, taken_at = np.array(fused), np.array(self._fused_at)
+            centre_share = new_view_share(correlation[0], taken, direction, taken_at, camera)[0]
+            radius_share = new_view_share(correlation[1], taken, direction, taken_at, camera)[0]
             obs = dataclasses.replace(obs, model=discounted(obs.model, centre_share, radius_share))
         if obs is not None:
             try:
@@ -264,12 +267,15 @@ class EpisodeLoop:
             if info.get("ik_failed") and not any(e.kind == "ik_failure" for e in events):
                 events.append(Event("ik_failed"))
         if accepted:
-            innovations.append((nis, np.size(obs.z) if obs is not None else 0))
+            if obs is not None:
+                innovations.append((nis, shared_dof(obs.model, np.size(obs.z), centre_share, radius_share)))
             fused.append(direction)
+            self._fused_at.append(camera)
         restarted = any(e.kind == "belief_reset" for e in events)
         if restarted:
             innovations[:] = innovations[-1:]
             fused[:] = fused[-1:]
+            self._fused_at[:] = self._fused_at[-1:]
         if self.claims is None:
             claimed = belief
         else:  # the share of the views so far, this one included, in which nothing was measured

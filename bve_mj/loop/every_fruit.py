@@ -247,6 +247,7 @@ def run_every_fruit(
             FruitTarget(
                 s.id, tracker.track(s.id).belief, s.localised, s.belief.sigma_max_m,
                 np.array(tracker.track(s.id).directions).reshape(-1, 3),
+                np.array(tracker.track(s.id).cameras).reshape(-1, 3),
             )
             for s in states
         ]  # fmt: skip

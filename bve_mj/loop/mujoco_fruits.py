@@ -282,7 +282,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         cov = np.diag([(sc / f) ** 2, (sc / f) ** 2, (sr / f) ** 2])
         if len(fruit.directions):
             e = (p - x[:3]) / rho
-            share_c, share_r = shares(fruit.directions, e)
+            share_c, share_r = shares(fruit.directions, e, fruit.cameras, p)
             g = np.sqrt([1.0 / share_c, 1.0 / share_c, 1.0 / share_r])
             cov = cov * np.outer(g, g)
         model = BearingSizeModel(p, R, cov)

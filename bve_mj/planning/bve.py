@@ -78,6 +78,7 @@ class BvePlanner:
     _views_precision: np.ndarray | None = field(init=False, default=None)
     _failed: list[np.ndarray] = field(init=False, default_factory=list)
     _fused: list[np.ndarray] = field(init=False, default_factory=list)
+    _fused_at: list[np.ndarray] = field(init=False, default_factory=list)  # their cameras [m]
 
     def __post_init__(self) -> None:
         self.constraint_names = check_constraint_names(self.constraint_names)
@@ -112,17 +113,19 @@ class BvePlanner:
         (:class:`SizeInformation` ``taken``)."""
         if restart:
             self._fused.clear()
+            self._fused_at.clear()
         d = np.asarray(p_world_camera, dtype=float) - np.asarray(p_world_target, dtype=float)
         n = float(np.linalg.norm(d))
         if isinstance(self.info, SizeInformation) and np.isfinite(n) and n > 1e-9:
             self._fused.append(d / n)
+            self._fused_at.append(np.asarray(p_world_camera, dtype=float).copy())
 
     def information_model(self) -> ObservationInformation:
         """Λn(c) as the objective sees it: each view as the share of a fresh one it adds
         beside the views fused, discounted near the views that failed."""
         info = self.info
         if self._fused and isinstance(info, SizeInformation):
-            info = dataclasses.replace(info, taken=np.array(self._fused))
+            info = dataclasses.replace(info, taken=np.array(self._fused), taken_at=np.array(self._fused_at))
         if not self._failed:
             return info
         width = math.radians(self.settings.planner.failed_view_width_deg)
@@ -177,7 +180,10 @@ class BvePlanner:
         estimate ``belief`` is fused into Σo (eq. 9)."""
         if self._views_precision is not None:
             x_hat = np.concatenate([plan.p_world_target, belief.mean[3:]])
-            self._views_precision = self._views_precision + self.info.information(plan.p_world_camera, x_hat)
+            # the radius-state model: as the objective expects the view (its share beside the
+            # views fused, the odds it detects): a camera that holds adds almost nothing to Σo
+            info = self.information_model() if isinstance(self.info, SizeInformation) else self.info
+            self._views_precision = self._views_precision + info.information(plan.p_world_camera, x_hat)
 
     def propose(self, belief: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
         """The best viewpoint for this belief, without changing the planner's state: the

@@ -64,14 +64,16 @@ EXPLORE = -1
 @dataclass(frozen=True)
 class FruitTarget:
     """A fruit as the planner sees it: its track id, the filter's belief (centre, radius),
-    whether it is localised (its claimed σmax below the stop threshold), that σmax [m], and
-    the unit directions fruit → camera of the views fused (k, 3)."""
+    whether it is localised (its claimed σmax below the stop threshold), that σmax [m], the
+    unit directions fruit → camera of the views fused (k, 3) and their cameras' positions [m]
+    (k, 3; None: not known, the views counted by their directions alone)."""
 
     id: int
     belief: Belief
     localised: bool
     sigma_max_m: float
     directions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    cameras: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

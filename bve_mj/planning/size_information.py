@@ -47,7 +47,9 @@ class SizeInformation:
     of a fresh view's information (:func:`~bve_mj.estimation.view_correlation.
     new_view_share`, per component with ``correlation`` = (centre, apparent radius)), the
     way the filter will fuse it: the BVE then prefers a view that adds evidence of its own
-    to a repeat of the best one.
+    to a repeat of the best one. ``taken_at``: the camera positions of those views [m] (k, 3),
+    for the part of the error views from nearby places share (a camera that holds where it
+    is expects almost nothing of the view it repeats).
     """
 
     bearing_var: tuple[float, float]
@@ -55,11 +57,12 @@ class SizeInformation:
     bearing: bool = True
     taken: np.ndarray | None = None
     correlation: tuple[ViewCorrelation, ViewCorrelation] = (ViewCorrelation(), ViewCorrelation())
+    taken_at: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         views = None
         if self.taken is not None and len(self.taken):
-            views = tuple(TakenViews.of(corr, self.taken) for corr in self.correlation)
+            views = tuple(TakenViews.of(corr, self.taken, self.taken_at) for corr in self.correlation)
         object.__setattr__(self, "_taken_views", views)
 
     def _rows(self, c: np.ndarray, x_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray, _RowDerivatives]:
@@ -116,7 +119,7 @@ class SizeInformation:
         w.append(w_a)
         dw_rho.append(dw_a)
         H, W0 = np.array(rows), np.array(w)
-        shares = self._view_shares(-x, rho, len(w))
+        shares = self._view_shares(-x, rho, len(w), np.asarray(c, dtype=float))
         W = W0 if shares is None else W0 * shares[0]
 
         def derivative() -> tuple[np.ndarray, np.ndarray]:
@@ -136,7 +139,9 @@ class SizeInformation:
 
         return H, W, derivative
 
-    def _view_shares(self, e: np.ndarray, rho: float, m: int) -> tuple[np.ndarray, np.ndarray] | None:
+    def _view_shares(
+        self, e: np.ndarray, rho: float, m: int, c: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
         """The share Δ of a fresh view that each of the m rows (the bearing rows, then the
         size row) of a view from direction ``e`` at distance ``rho`` adds beside ``taken``,
         (m,), and its derivative in c, (m, 3); None when every view counts in full."""
@@ -144,9 +149,10 @@ class SizeInformation:
         if views is None:
             return None
         P = (np.eye(3) - np.outer(e, e)) / rho  # ∂e/∂c
-        (fc, dfc), (fr, dfr) = (v.share(e) for v in views)
+        (fc, dfc, dcc), (fr, dfr, dcr) = (v.share_at(e, c) for v in views)
+        gc, gr = P @ dfc() + dcc(), P @ dfr() + dcr()
         f = np.array([fc] * (m - 1) + [fr])
-        df = np.array([P @ dfc] * (m - 1) + [P @ dfr])
+        df = np.array([gc] * (m - 1) + [gr])
         return f, df
 
     def information(self, c: np.ndarray, x_hat: np.ndarray) -> np.ndarray:
@@ -213,7 +219,7 @@ class SizeInformation:
         fc, fr = 1.0, 1.0
         if views is not None:
             e = np.array([-x0, -x1, -x2])
-            (fc, dfc), (fr, dfr) = (v.share_lazy(e) for v in views)
+            (fc, dfc, dcc), (fr, dfr, dcr) = (v.share_at(e, np.array([c0, c1, c2])) for v in views)
         p, dp = (1.0, None) if odds is None else odds
         a, wv = w_b * fc / (rho * rho), w_a * fr
         v0, v1, v2, v3 = s_a * x0, s_a * x1, s_a * x2, s_r
@@ -289,8 +295,8 @@ class SizeInformation:
             ])  # fmt: skip
             if views is not None:
                 P = (np.eye(3) - np.outer(e, e)) / rho  # ∂e/∂c
-                g += (-p * w_b / (rho * rho) * tr_np) * (P @ dfc())
-                g += (-p * w_a * v_mv + p * w_a * s_r * s_r / m33) * (P @ dfr())
+                g += (-p * w_b / (rho * rho) * tr_np) * (P @ dfc() + dcc())
+                g += (-p * w_a * v_mv + p * w_a * s_r * s_r / m33) * (P @ dfr() + dcr())
             if dp is not None:  # ∂p: -tr(M⁻¹ Λn) + Λn_rr/M_rr
                 g += (-(wv * v_mv + a * tr_np) + wv * v3 * v3 / m33) * dp()
             return g
