@@ -52,7 +52,9 @@ def main() -> None:
     ]
     rows = [r for batch in local_batches(_task, tasks, min(args.workers, len(tasks))) for r in batch]
     noise = load_noise_model(Settings().measurement.noise_model)
-    table = twin_correlations(rows)
+    table = twin_correlations(rows) if rows else []
+    if len(table) < 3:
+        ap.error(f"--views: {len(rows)} twin pairs, too few to fit (10 at three displacements): more views")
     print(f"{len(rows)} twin pairs: {args.only}, {args.scenes} scenes x {args.views} views, seed {args.seed}")
     head = (("delta mm", 8), ("pairs", 5), ("angle deg", 9), ("centre rho", 10), ("model", 6))
     print(" ".join(f"{h:>{w}s}" for h, w in head) + f" {'radius rho':>10s} {'model':>6s}")

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from bve_mj.campaigns.scenarios import Scenario
+from bve_mj.campaigns.view_draws import calibration_scene, draw_direction
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.noise import NoiseModel
 from bve_mj.estimation.noise_fit import fit_noise_model
@@ -57,9 +58,6 @@ __all__ = [
     "sample_views",
 ]
 
-_DISTANCE_M = (0.12, 0.45)  # camera to fruit centre
-_AZIMUTH_DEG = 70.0  # either side of the robot's side of the fruit (-x)
-_ELEVATION_DEG = (-35.0, 55.0)
 _AIM_SIGMA_M = (0.0005, 0.008)  # the loop's estimate error when it looks (its σ drawn here)
 _ATTEMPTS = 8  # candidate poses tried per view asked for (the arm reaches about a third)
 
@@ -76,41 +74,25 @@ def sample_views(
     import mujoco
 
     from bve_mj.perception.all_fruit import detect_all
-    from bve_mj.perception.detection import Detection, Intrinsics, Prediction
+    from bve_mj.perception.detection import Detection, Prediction
     from bve_mj.perception.detector import detect
-    from bve_mj.robot import IkOptions, arm_kinematics, look_at_ik
+    from bve_mj.robot import IkOptions, look_at_ik
     from bve_mj.sim.arm import CAMERA_NAME
-    from bve_mj.sim.mujoco_world import declared_noise
-    from bve_mj.sim.render import OffscreenRenderer
-    from bve_mj.sim.scene import build_scene
     from bve_mj.sim.sensors import noisy_image
 
-    scene_ss, view_ss = np.random.SeedSequence(scene_seed).spawn(2)
-    rng = np.random.default_rng(view_ss)
-    kin = arm_kinematics(settings.robot.name, settings.robot.limit_set)
-    spec, info = build_scene(kin, settings.scene, np.random.default_rng(scene_ss), settings.camera)
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    adr = np.array([model.jnt_qposadr[model.joint(n).id] for n in kin.joint_names])
-    cam = settings.camera
-    f = cam.focal_px
-    intrinsics = Intrinsics.from_camera(cam)
-    measurement, fruit = declared_noise(settings)
+    rng, kin, info, model, data, adr, intrinsics, measurement, fruit, renderer = calibration_scene(
+        settings, scene_seed
+    )
+    f = settings.camera.focal_px
     target = info.target
     truth = target.centre_m
     rows: list[dict[str, Any]] = []
-    renderer = OffscreenRenderer(
-        model, cam.width_px, cam.height_px, shadows=settings.scene.shadows, blur_sigma_px=cam.blur_sigma_px
-    )
     q_seed = kin.home.copy()
     try:
         view, attempts = 0, 0
         while view < views and attempts < _ATTEMPTS * views:  # about a third are reachable
             attempts += 1
-            az = math.radians(rng.uniform(-_AZIMUTH_DEG, _AZIMUTH_DEG))
-            el = math.radians(rng.uniform(*_ELEVATION_DEG))
-            rho = rng.uniform(*_DISTANCE_M)
-            direction = np.array([-math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+            direction, rho = draw_direction(rng)
             sigma_aim = math.exp(rng.uniform(*np.log(_AIM_SIGMA_M)))
             aim = truth + rng.normal(0.0, sigma_aim, 3)
             ik = look_at_ik(kin, truth + rho * direction, aim, q_seed, rng, IkOptions(restarts=2))

@@ -34,9 +34,6 @@ __all__ = ["DELTAS_M", "TwinCorrelation", "fit_nearby", "fit_twins", "sample_twi
 DELTAS_M = (0.0, 0.002, 0.005, 0.01, 0.02, 0.04)
 """The displacements of a view's twins [m]."""
 
-_DISTANCE_M = (0.12, 0.45)  # as the calibration draws its views
-_AZIMUTH_DEG = 70.0
-_ELEVATION_DEG = (-35.0, 55.0)
 _AIM_SIGMA_M = 0.002
 _ATTEMPTS = 8
 
@@ -51,29 +48,17 @@ def sample_twins(
     import mujoco
 
     from bve_mj.campaigns.calibration import _detection_fields
-    from bve_mj.perception.detection import Detection, Intrinsics, Prediction
+    from bve_mj.campaigns.view_draws import calibration_scene, draw_direction
+    from bve_mj.perception.detection import Detection, Prediction
     from bve_mj.perception.detector import detect
-    from bve_mj.robot import IkOptions, arm_kinematics, look_at_ik
+    from bve_mj.robot import IkOptions, look_at_ik
     from bve_mj.sim.arm import CAMERA_NAME
-    from bve_mj.sim.mujoco_world import declared_noise
-    from bve_mj.sim.render import OffscreenRenderer
-    from bve_mj.sim.scene import build_scene
     from bve_mj.sim.sensors import noisy_image
 
-    scene_ss, view_ss = np.random.SeedSequence(scene_seed).spawn(2)
-    rng = np.random.default_rng(view_ss)
-    kin = arm_kinematics(settings.robot.name, settings.robot.limit_set)
-    spec, info = build_scene(kin, settings.scene, np.random.default_rng(scene_ss), settings.camera)
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    adr = np.array([model.jnt_qposadr[model.joint(n).id] for n in kin.joint_names])
-    cam = settings.camera
-    intrinsics = Intrinsics.from_camera(cam)
-    measurement, fruit = declared_noise(settings)
-    truth, radius = info.target.centre_m, info.target.radius_m
-    renderer = OffscreenRenderer(
-        model, cam.width_px, cam.height_px, shadows=settings.scene.shadows, blur_sigma_px=cam.blur_sigma_px
+    rng, kin, info, model, data, adr, intrinsics, measurement, fruit, renderer = calibration_scene(
+        settings, scene_seed
     )
+    truth, radius = info.target.centre_m, info.target.radius_m
     q_seed = kin.home.copy()
 
     def shot(c: np.ndarray, aim: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
@@ -91,7 +76,7 @@ def sample_twins(
         )  # fmt: skip
         if not isinstance(det, Detection):
             return None
-        d = _detection_fields(det, R.T @ (truth - p), radius, cam.focal_px)
+        d = _detection_fields(det, R.T @ (truth - p), radius, settings.camera.focal_px)
         return p, np.array([d["err_u_px"], d["err_v_px"], d["err_alpha_px"]]), float(det.radius_px)
 
     rows: list[dict[str, Any]] = []
@@ -99,10 +84,7 @@ def sample_twins(
         taken = attempts = 0
         while taken < views and attempts < _ATTEMPTS * views:
             attempts += 1
-            az = math.radians(rng.uniform(-_AZIMUTH_DEG, _AZIMUTH_DEG))
-            el = math.radians(rng.uniform(*_ELEVATION_DEG))
-            rho = rng.uniform(*_DISTANCE_M)
-            direction = np.array([-math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+            direction, rho = draw_direction(rng)
             aim = truth + rng.normal(0.0, _AIM_SIGMA_M, 3)
             base = shot(truth + rho * direction, aim)
             if base is None:
