@@ -81,7 +81,8 @@ class Track:
             tracks started in one view and merged are one view's evidence, not two; a camera
             held where it was sees what it saw: one viewpoint, however many views).
         first_view, last_view: the views that started it and last saw it.
-        innovations: (NIS, dimension) of its assigned detections after the first.
+        innovations: (NIS, degrees of freedom: its share of a fresh view, :func:`~bve_mj.estimation.
+            view_correlation.shared_dof`) of its assigned detections after the first.
         directions: unit directions fruit → camera of the views fused, for the correlation of
             views from nearby directions (the first's included).
         cameras: the camera positions of those views [m], for the part views from nearby
