@@ -18,22 +18,13 @@ import math
 
 import numpy as np
 
-from bve_mj.campaigns.executors import local_batches
 from bve_mj.campaigns.scenarios import load_suite
-from bve_mj.campaigns.spec import episode_seed
-from bve_mj.campaigns.twin_views import fit_nearby, sample_twins, twin_correlations
+from bve_mj.campaigns.twin_views import fit_nearby, twin_correlations, twin_rows
 from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import Settings
 from bve_mj.estimation.noise import load_noise_model
 
 SCENES = "clean,beefsteak,ripe_truss,truss_chain,truss_cluster,cherry_truss,heavy_occlusion,plum"
-
-
-def _task(task: tuple[str, Settings, int, int]) -> list[dict[str, object]]:
-    from bve_mj.threads import one_blas_thread
-
-    with one_blas_thread():
-        return sample_twins(*task)
 
 
 def main() -> None:
@@ -45,12 +36,7 @@ def main() -> None:
     ap.add_argument("--workers", type=integer(1, 64), default=2, help="local processes (default 2)")
     args = ap.parse_args()
     suite = load_suite(only=args.only.split(","))
-    tasks = [
-        (sc.name, sc.settings("camera"), episode_seed(args.seed, k), args.views)
-        for sc in suite
-        for k in range(args.scenes)
-    ]
-    rows = [r for batch in local_batches(_task, tasks, min(args.workers, len(tasks))) for r in batch]
+    rows = twin_rows(suite, scenes=args.scenes, views=args.views, seed=args.seed, workers=args.workers)
     noise = load_noise_model(Settings().measurement.noise_model)
     table = twin_correlations(rows) if rows else []
     if len(table) < 3:

@@ -148,6 +148,9 @@ def test_twin_views_fit_the_nearby_part(rng):
         assert fit.nearby == pytest.approx(0.75, abs=2e-3) and fit.length_m == pytest.approx(0.018, rel=1e-2)
     with pytest.raises(ValueError, match="at least 3"):
         fit_nearby(table[:2], truth, "centre")
+    # twins that correlate no more near than far (few pairs): a valid model, not a crash
+    flat = [TwinCorrelation(d, 20, 0.999, 0.3, 0.3) for d in deltas]
+    assert 1e-4 <= fit_nearby(flat, ViewCorrelation(0.3, 0.03), "centre").length_m <= 1.0
     rows = []
     for d, cs in zip(deltas, cos, strict=True):
         r = float(truth.rho(np.array(cs)) + truth.rho_near(np.array(d)))

@@ -29,13 +29,17 @@ import numpy as np
 from bve_mj.estimation.noise import NoiseModel
 from bve_mj.estimation.view_correlation import ViewCorrelation
 
-__all__ = ["DELTAS_M", "TwinCorrelation", "fit_nearby", "fit_twins", "sample_twins", "twin_correlations"]
+__all__ = [
+    "DELTAS_M", "TwinCorrelation", "fit_nearby", "fit_twins", "sample_twins", "twin_correlations",
+    "twin_rows",
+]  # fmt: skip
 
 DELTAS_M = (0.0, 0.002, 0.005, 0.01, 0.02, 0.04)
 """The displacements of a view's twins [m]."""
 
 _AIM_SIGMA_M = 0.002
 _ATTEMPTS = 8
+_LOG_LENGTH = (math.log(1e-4), 0.0)  # the kernel's length searched [ln m]
 
 
 def sample_twins(
@@ -175,8 +179,8 @@ def fit_nearby(table: Sequence[TwinCorrelation], corr: ViewCorrelation, componen
     observed = np.array([getattr(t, component) for t in table])
 
     def model(p: np.ndarray) -> tuple[float, float, np.ndarray]:
-        a = 0.99 / (1.0 + math.exp(-p[0]))
-        length = math.exp(p[1])
+        a = 0.99 / (1.0 + math.exp(-min(max(p[0], -30.0), 30.0)))
+        length = math.exp(min(max(p[1], _LOG_LENGTH[0]), _LOG_LENGTH[1]))  # 0.1 mm to 1 m: a few pairs
         x = math.sqrt(3.0) * delta / length
         return a, length, direct + (1.0 - corr.weight) * a * (1.0 + x) * np.exp(-x)
 
@@ -196,6 +200,23 @@ def _twin_task(task: tuple[str, Any, int, int]) -> list[dict[str, Any]]:
         return sample_twins(*task)
 
 
+def twin_rows(
+    scenarios: Sequence[Any], *, scenes: int, views: int, seed: int, workers: int
+) -> list[dict[str, Any]]:
+    """:func:`sample_twins` of ``views`` drawn views of each of ``scenes`` seeded scenes of
+    every scenario (``scenarios``: :class:`~bve_mj.campaigns.spec.Scenario`; the scenes the
+    calibration's seed ``seed`` draws), in ``workers`` spawned processes."""
+    from bve_mj.campaigns.executors import local_batches
+    from bve_mj.campaigns.spec import episode_seed
+
+    tasks = [
+        (sc.name, sc.settings("camera"), episode_seed(seed, k), views)
+        for sc in scenarios
+        for k in range(scenes)
+    ]
+    return [r for batch in local_batches(_twin_task, tasks, max(1, min(workers, len(tasks)))) for r in batch]
+
+
 def fit_twins(
     model: NoiseModel,
     scenarios: Sequence[Any],
@@ -205,20 +226,11 @@ def fit_twins(
     seed: int,
     workers: int,
 ) -> tuple[NoiseModel, list[TwinCorrelation], int]:
-    """``model`` with the nearby part of both correlations fitted (:func:`fit_nearby`) to
-    ``views`` drawn views (and their twins) of each of ``scenes`` seeded scenes of every
-    scenario (``scenarios``: :class:`~bve_mj.campaigns.spec.Scenario`), in ``workers`` spawned
-    processes; with the table of correlations and the pairs. Too few pairs (fewer than three
-    displacements with ten): ``model`` as it is (nearby views counted by their directions)."""
-    from bve_mj.campaigns.executors import local_batches
-    from bve_mj.campaigns.spec import episode_seed
-
-    tasks = [
-        (sc.name, sc.settings("camera"), episode_seed(seed, k), views)
-        for sc in scenarios
-        for k in range(scenes)
-    ]
-    rows = [r for batch in local_batches(_twin_task, tasks, max(1, min(workers, len(tasks)))) for r in batch]
+    """``model`` with the nearby part of both correlations fitted (:func:`fit_nearby`) to the
+    twins of :func:`twin_rows`; with the table of correlations and the pairs. Too few pairs
+    (fewer than three displacements with ten): ``model`` as it is (nearby views counted by
+    their directions)."""
+    rows = twin_rows(scenarios, scenes=scenes, views=views, seed=seed, workers=workers)
     table = twin_correlations(rows) if rows else []
     if len(table) < 3:
         return model, table, len(rows)

@@ -219,7 +219,7 @@ class SizeInformation:
         fc, fr = 1.0, 1.0
         if views is not None:
             e = np.array([-x0, -x1, -x2])
-            (fc, dfc, dcc), (fr, dfr, dcr) = (v.share_at(e, np.array([c0, c1, c2])) for v in views)
+            (fc, dfc, dcc), (fr, dfr, dcr) = (v.share_at(e, c) for v in views)
         p, dp = (1.0, None) if odds is None else odds
         a, wv = w_b * fc / (rho * rho), w_a * fr
         v0, v1, v2, v3 = s_a * x0, s_a * x1, s_a * x2, s_r
