@@ -16,7 +16,7 @@ scene; ``source: "every"``): the fruit beside the target that ``--fruits all`` f
 takes), which the target's views alone never sample. The model is fitted to the target's
 rows; the neighbours' rows fit the views' tail (:mod:`bve_mj.estimation.outliers`), which the
 every-fruit tracker fuses with (pooled into the model itself, they changed nothing on
-held-out seeds: README, "Calibrating what the every-fruit filter fuses").
+held-out seeds: docs/honesty.md, "Calibrating what the every-fruit filter fuses").
 :func:`bve_mj.estimation.noise_fit.fit_noise_model`
 turns the samples into the noise model the filter uses, each fruit's rows its own
 (:func:`bve_mj.estimation.noise_tail.fruit_key`).

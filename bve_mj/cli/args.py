@@ -148,17 +148,22 @@ def given(**values: object) -> dict[str, object]:
     return {k: v for k, v in values.items() if v is not None}
 
 
-def float_arg(name: str, text: str | None, minimum: float, strict: bool = False) -> float | None:
+def float_arg(
+    name: str, text: str | None, minimum: float, strict: bool = False, maximum: float = math.inf
+) -> float | None:
+    """The number option ``name`` (None when not given): finite, at least ``minimum`` (above
+    it when ``strict``) and at most ``maximum``."""
     from bve_mj.errors import ConfigError
 
     if text is None:
         return None
-    allowed = f"a number {'>' if strict else '>='} {minimum:g}"
+    top = "" if math.isinf(maximum) else f" and <= {maximum:g}"
+    allowed = f"a number {'>' if strict else '>='} {minimum:g}{top}"
     try:
         value = float(text)
     except ValueError:
         raise ConfigError(name, text, allowed) from None
-    if not math.isfinite(value) or value < minimum or (strict and value == minimum):
+    if not math.isfinite(value) or not minimum <= value <= maximum or (strict and value == minimum):
         raise ConfigError(name, text, allowed)
     return value
 

@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import NoReturn, TypeVar
 
-from bve_mj.cli.args import EXIT_USAGE, MAX_RUNS, int_arg
+from bve_mj.cli.args import EXIT_USAGE, MAX_RUNS, float_arg, int_arg
 
 __all__ = ["SEED", "ScriptParser", "folder", "guarded", "integer", "integers", "names", "number"]
 
@@ -57,13 +57,13 @@ def number(minimum: float, maximum: float = math.inf) -> Callable[[str], float]:
     """An argparse ``type``: a finite number in [minimum, maximum]."""
 
     def parse(text: str) -> float:
+        from bve_mj.errors import ConfigError
+
         try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        if not (math.isfinite(value) and minimum <= value <= maximum):
-            top = "" if math.isinf(maximum) else f" and <= {maximum:g}"
-            raise argparse.ArgumentTypeError(f"got {text!r}; allowed: a number >= {minimum:g}{top}")
+            value = float_arg("", text, minimum, maximum=maximum)
+        except ConfigError as exc:
+            raise argparse.ArgumentTypeError(f"got {text!r}; allowed: {exc.allowed}") from None
+        assert value is not None
         return value
 
     return parse

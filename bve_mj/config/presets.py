@@ -61,7 +61,7 @@ class WorldPreset:
     upright_weight: float
     """``planner.upright_weight``: none in the paper's protocol (its E5/E10 table is the
     paper's); in MuJoCo the eye-in-hand image is turned upright where the arm allows (on the
-    held-out seed 9137 it cost no convergence: README, upright images)."""
+    held-out seed 9137 it cost no convergence: docs/arm.md, upright images)."""
 
 
 PRESETS: dict[WorldName, WorldPreset] = {
