@@ -63,13 +63,14 @@ def tail_scale(
     scale. So the tail is measured on what an episode would claim from the calibration
     views: per fruit, :data:`TAIL_DRAWS` draws of 3 to 6 of its views (seeded), each fused
     by the linearised filter at the truth (bearing and apparent size, centre and radius in
-    the state, each view's noise from ``model``, a view near the ones drawn before it
-    counted as the share it adds), its error against the claim; κ² is the 90% upper bound,
-    over a bootstrap of the fruits, of these errors' 99.9% quantile over χ²₃'s (the quantile
-    rests on the few fruits that err most, and a new scene brings others). The errors of single views
-    are heavy-tailed (2% beyond 3σ, calibration seed 1), and a per-view κ² (2.6 there) made
-    every claim three times too wide; fused and claimed as the loop claims, the 99.9%
-    quantile's bound is 1.67 times χ²₃'s there. 1 with fewer than 20 fruits of 4 views.
+    the state, each view's noise from ``model``, a view near the ones drawn before it, in
+    direction or in place, counted as the share it adds), its error against the claim; κ²
+    is the 90% upper bound, over a bootstrap of the fruits, of these errors' 99.9% quantile
+    over χ²₃'s (the quantile rests on the few fruits that err most, and a new scene brings
+    others). The errors of single views are heavy-tailed (2% beyond 3σ, calibration seed
+    1), and a per-view κ² (2.6 there) made every claim three times too wide; fused and
+    claimed as the loop claims, the 99.9% quantile's bound is 1.67 times χ²₃'s there. 1
+    with fewer than 20 fruits of 4 views.
 
     ``sigmas_px(row)``: the per-view σ of the centre's image coordinates and of the apparent
     radius the model gives that row [px]."""
@@ -101,6 +102,7 @@ def tail_scale(
             ]
             info, grad = prior_info.copy(), np.zeros(4)
             taken: list[np.ndarray] = []
+            taken_at: list[np.ndarray] = []  # the cameras of the views drawn before
             terms: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
             dof = 0.0  # each view's as the share it adds (shared_dof), as the loop counts them
             for r in drawn:
@@ -113,11 +115,13 @@ def tail_scale(
                 direction = (p - truth) / np.linalg.norm(p - truth)
                 cs = rs = 1.0
                 if taken:
-                    cs = new_view_share(model.centre_correlation, np.array(taken), direction)[0]
-                    rs = new_view_share(model.radius_correlation, np.array(taken), direction)[0]
+                    at = np.array(taken_at)
+                    cs = new_view_share(model.centre_correlation, np.array(taken), direction, at, p)[0]
+                    rs = new_view_share(model.radius_correlation, np.array(taken), direction, at, p)[0]
                     cov = cov / np.outer(np.sqrt([cs, cs, rs]), np.sqrt([cs, cs, rs]))
                 dof += 2.0 * cs + rs
                 taken.append(direction)
+                taken_at.append(p)
                 H = BearingSizeModel(p, np.asarray(r["camera_rotation"], dtype=float), cov).jacobian(x)
                 W = np.linalg.inv(cov)
                 info += H.T @ W @ H
