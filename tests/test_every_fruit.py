@@ -239,6 +239,18 @@ def test_a_ripe_truss_of_six_is_localised_and_every_fruit_visited_without_touchi
     assert len(matches) == 6
     assert sum(m.localised_within(5.0) for m in matches) >= 5
     assert false == []
+    # the fruit localised after the first k views: none after the start's alone (a track is
+    # localised after 3 hits), as many as the final tracks hold after every view, all six at
+    # the view that localised the whole truss and not before it
+    views = len(ep.result.views)
+    assert ep.localised_after(1, 5.0) == 0
+    assert ep.localised_after(views, 5.0) == ep.localised_after(10 * views, 5.0)
+    assert ep.localised_after(views, 5.0) == sum(m.localised_within(5.0) for m in matches)
+    k = ep.views_to_localise(5.0)
+    if k is not None:
+        assert ep.localised_after(k, 5.0) == 6 and ep.localised_after(k - 1, 5.0) < 6
+    with pytest.raises(ValueError, match="at least 1"):
+        ep.localised_after(0, 5.0)
     assert ep.harvest is not None and len(ep.harvest.visits) == len(
         [t for t in ep.result.final if t.localised]
     )
@@ -643,7 +655,8 @@ def test_a_claimed_track_keeps_its_own_belief_and_the_fruit_match_scores_both():
 
 def test_the_every_fruit_table_reports_the_claimed_radius_nees():
     """A tracked fruit's radius NEES is ((r̂ - r) / σ_r)² of its claimed belief; the summary
-    averages it over the tracked fruit and the table prints it as ``r NEES``."""
+    averages it over the tracked fruit and the table prints it as ``r NEES``; beside the
+    share localised at the end, the share localised after the first 10 views."""
     from types import SimpleNamespace
 
     from bve_mj.campaigns.fruit_suite import FruitSuiteResult, format_fruit_suite
@@ -654,11 +667,14 @@ def test_the_every_fruit_table_reports_the_claimed_radius_nees():
     assert radius_metrics(Belief(np.array([0.45, 0.0, 0.2]), np.eye(3) * 1e-8), 0.030)["radius_nees"] is None
     rows = (_row(0, 5), _row(1, 6))
     rows[0]["fruits"][0]["radius_nees"], rows[1]["fruits"][0]["radius_nees"] = 4.0, 2.0
+    rows[0]["localised_in_budget"], rows[1]["localised_in_budget"] = 1, 0  # the second after 10 views
     result = FruitSuiteResult((SimpleNamespace(name="truss", description=""),), {"truss": rows}, 0, 2, 1.0)
     summary = result.summary("truss")
     assert summary["radius_nees_mean"] == pytest.approx(3.0)
+    assert summary["localised_pct"] == 100.0 and summary["localised_in_budget_pct"] == 50.0
     head, _, line, _ = format_fruit_suite({"truss": summary})
     assert "r NEES" in head and "3.00" in line.split()
+    assert head.split()[3:5] == ["loc%", "loc%@10"] and line.split()[3:5] == ["100.0", "50.0"]
 
 
 def test_planners_compared_in_one_pool_give_each_planners_own_suite():

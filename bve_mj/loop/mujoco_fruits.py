@@ -137,6 +137,18 @@ class FruitsEpisode:
                 return k
         return None
 
+    def localised_after(self, views: int, within_mm: float) -> int:
+        """How many true ripe fruit of the zone had a localised track within ``within_mm`` of
+        them after the first ``views`` views (the start's counted; the episode's end where it
+        took fewer)."""
+        if views < 1:
+            raise ValueError(f"views must be at least 1, got {views}")
+        done = self.result.views
+        if not done:
+            return 0
+        matches, _, _ = self.matches(done[min(views, len(done)) - 1].fruits)
+        return sum(m.localised_within(within_mm) for m in matches)
+
     def to_json(self) -> dict[str, Any]:
         """The ``--json`` document of ``--fruits all``: settings, seed, per view the tracks and
         what the tracker did, and ``fruits``: per true ripe fruit its truth, radius and the
