@@ -129,13 +129,8 @@ class FruitsEpisode:
     def views_to_localise(self, within_mm: float) -> int | None:
         """How many views it took until every true ripe fruit of the zone had a localised
         track within ``within_mm`` of it (None: never in this episode, or no ripe fruit)."""
-        if not self.ripe:
-            return None
-        for k, view in enumerate(self.result.views, start=1):
-            matches, _, _ = self.matches(view.fruits)
-            if all(m.localised_within(within_mm) for m in matches):
-                return k
-        return None
+        n, ripe = len(self.result.views), len(self.ripe)
+        return next((k for k in range(1, n + 1) if ripe and self.localised_after(k, within_mm) == ripe), None)
 
     def localised_after(self, views: int, within_mm: float) -> int:
         """How many true ripe fruit of the zone had a localised track within ``within_mm`` of
@@ -144,9 +139,7 @@ class FruitsEpisode:
         if views < 1:
             raise ValueError(f"views must be at least 1, got {views}")
         done = self.result.views
-        if not done:
-            return 0
-        matches, _, _ = self.matches(done[min(views, len(done)) - 1].fruits)
+        matches, _, _ = self.matches(done[min(views, len(done)) - 1].fruits) if done else ([], [], [])
         return sum(m.localised_within(within_mm) for m in matches)
 
     def to_json(self) -> dict[str, Any]:
