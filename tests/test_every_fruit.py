@@ -79,6 +79,41 @@ def test_the_view_that_sees_more_open_fruit_wins_and_a_hidden_one_counts_nothing
         planner.plan([_target(0, a, 0.0005, localised=True)], np.zeros(3), 3)
 
 
+def test_a_view_from_where_a_fruit_was_hidden_counts_less_of_its_gain_until_one_measures_it():
+    """Two candidate views, each predicted to see both fruit (1 nat each): they tie, the first
+    wins. A view from the first one's direction was predicted to show fruit 1 and did not
+    measure it (a stem the tracks do not hold): from there fruit 1 counts nothing, 13° off
+    half, and the second view wins; once a view measures fruit 1 (or its track is gone) the
+    views tie again."""
+    a, b = np.array([0.5, 0.0, 0.3]), np.array([0.5, 0.08, 0.3])
+    first, second = np.array([0.2, 0.0, 0.3]), np.array([0.3, 0.3, 0.3])  # 55° apart seen from b
+    views = iter([_Fixed(first), _Fixed(second)])
+    planner = EveryFruitPlanner(lambda: next(views), lambda f, p, R: 1.0,
+                                lambda c, r, p, R: np.ones(len(c), dtype=bool), candidates=2)  # fmt: skip
+    fruits = [_target(0, a, 0.01), _target(1, b, 0.01)]
+
+    def chosen():
+        plan, _ = planner.plan(fruits, np.array([0.2, 0.04, 0.3]), 1)
+        return [s.score for s in planner.last_scores], plan.p_world_camera
+
+    scores, at = chosen()
+    assert scores == [2.0, 2.0] and np.allclose(at, first)
+    planner.note_hidden(1, first + 0.1 * (first - b) / np.linalg.norm(first - b), b)
+    scores, at = chosen()
+    assert scores == pytest.approx([1.0, 2.0], abs=1e-6) and np.allclose(at, second)
+    assert planner._shown(1, b + rotation_about_z(13.0) @ (first - b), b) == pytest.approx(0.5, abs=0.03)
+    planner.note_fused_view(1, second, b)
+    assert chosen()[0] == [2.0, 2.0]
+    planner.note_hidden(1, first, b)
+    planner.forget(1)
+    assert planner._shown(1, first, b) == 1.0
+
+
+def rotation_about_z(deg):
+    t = np.radians(deg)
+    return np.array([[np.cos(t), -np.sin(t), 0.0], [np.sin(t), np.cos(t), 0.0], [0.0, 0.0, 1.0]])
+
+
 def test_a_view_whose_move_is_not_clear_is_left_out_and_with_none_clear_the_planner_fails():
     """The world's clearance check (``clear``): the better view's move passes through a known
     fruit, so the other candidate's view is taken; with no clear move the planner raises
@@ -188,7 +223,8 @@ def test_planners_are_compared_on_the_same_seeds_never_counting_as_more_views_th
 
 
 def test_a_baseline_aims_at_the_fruit_found_and_plans_for_none_of_them():
-    from bve_mj.planning.every_fruit import EXPLORE, PatternPlanner
+    from bve_mj.planning.every_fruit import EXPLORE
+    from bve_mj.planning.fruit_baselines import PatternPlanner
 
     seen = []
 

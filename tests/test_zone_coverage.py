@@ -310,3 +310,45 @@ def test_a_survey_that_stalls_on_a_hidden_fruit_ends_for_the_harvest_when_one_ma
     # pick, so the survey does not hand over
     localised = next(s.id for s in stalled.final if s.localised)
     assert len(run(4, visited={localised}).views) == len(patient.views)
+
+
+def test_the_loop_tells_the_planner_which_views_the_tracks_misjudged_and_from_where():
+    """A stem on one side (+y) hides the second fruit from every view there; the tracks, as
+    spheres, predict it shows. Each such view is reported to a planner that learns where
+    fruit hide (``note_hidden``), with the camera and the fruit's track: from that side only,
+    for that fruit only; a planner that does not learn it is not asked."""
+    beside = CENTRE + np.array([0.0, 0.1, 0.0])
+
+    class _Stem(_World):
+        def observe_all(self):
+            R = camera_rotation(self.p, self.target)
+            centres = np.array(self.fruit)
+            seen = visible_arc_deg(centres, np.full(len(centres), RADIUS), self.p, R, F, W, H) >= 150.0
+            seen[1] &= self.p[1] <= CENTRE[1] + 0.02  # the stem: the second fruit hidden from +y
+            model = BearingSizeModel(self.p, R, np.eye(3) * (0.3 / F) ** 2)
+            return [Sighting(model.predict(np.r_[c, RADIUS]), model) for c in centres[seen]], model
+
+    class _Learns(_Planner):
+        def __init__(self):
+            super().__init__()
+            self.hidden = []
+
+        def note_hidden(self, fruit, p_world_camera, p_world_fruit):
+            self.hidden.append((fruit, np.array(p_world_camera), np.array(p_world_fruit)))
+
+    cfg = TrackingConfig(fruits="all", zone_m=0.3)
+
+    def visible(c, r, m):
+        return visible_arc_deg(c, r, m.p_world_camera, m.R_world_camera, F, W, H) >= 150.0
+
+    planner = _Learns()
+    tracker = Tracker(cfg, CENTRE, PRIOR, filter_update("ekf", 10), visible)
+    zone = Belief(np.r_[CENTRE, PRIOR[0]], np.diag([0.15**2] * 3 + [PRIOR[1] ** 2]))
+    res = run_every_fruit(_Stem([CENTRE, beside]), planner, tracker, 12, 0.002, 3, zone=zone)
+    assert planner.hidden, "no view was reported"
+    for fruit, camera, at in planner.hidden:
+        assert camera[1] > CENTRE[1] + 0.02
+        assert np.linalg.norm(at - beside) < 0.01  # the track of the fruit behind the stem
+    assert run_every_fruit(_Stem([CENTRE, beside]), _Planner(), Tracker(cfg, CENTRE, PRIOR,
+                           filter_update("ekf", 10), visible), 12, 0.002, 3, zone=zone).views  # fmt: skip
+    assert res.views

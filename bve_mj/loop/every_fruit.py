@@ -38,7 +38,13 @@ from bve_mj.loop.claims import Claims
 from bve_mj.loop.events import Event
 from bve_mj.loop.fruit_records import FruitsResult, FruitState, FruitsView
 from bve_mj.loop.outcomes import Outcome
-from bve_mj.planning.every_fruit import EXPLORE, FruitTarget, PlansForEveryFruit, ReportsCandidates
+from bve_mj.planning.every_fruit import (
+    EXPLORE,
+    FruitTarget,
+    LearnsWhereFruitHide,
+    PlansForEveryFruit,
+    ReportsCandidates,
+)
 from bve_mj.planning.plan import ViewPlan
 from bve_mj.planning.zone_coverage import ZoneCoverage
 from bve_mj.sim.world import ReportsUnmeasured, SeesEveryFruit
@@ -177,6 +183,9 @@ def run_every_fruit(
                 planner.note_fused_view(tid, world.p_world_camera, tracker.track(tid).centre_m)
         if target is not None and plan is not None and target not in {tid for _, tid in step.assigned}:
             planner.note_failed_view(target, world.p_world_camera, plan.p_world_target)
+        for tid in set(step.expected) - {tid for _, tid in step.assigned} & alive:
+            if isinstance(planner, LearnsWhereFruitHide):  # predicted to show it, it did not
+                planner.note_hidden(tid, world.p_world_camera, tracker.track(tid).centre_m)
         info = world.view_info()
         here = world.p_world_camera
         seen_from.append(

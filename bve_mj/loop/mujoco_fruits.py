@@ -47,10 +47,10 @@ from bve_mj.loop.unhiding import ArmUnhider
 from bve_mj.planning.every_fruit import (
     EveryFruitPlanner,
     FruitTarget,
-    PatternPlanner,
     PlansForEveryFruit,
     information_gain,
 )
+from bve_mj.planning.fruit_baselines import PatternPlanner
 from bve_mj.planning.plan import ViewPlan
 from bve_mj.planning.zone_coverage import ZoneCoverage
 from bve_mj.robot import make_arm_planner

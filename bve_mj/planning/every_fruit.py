@@ -11,7 +11,10 @@ is then scored by the joint information it gives the fruit not yet localised,
 the sum over fruit of the log-volume each one's centre uncertainty loses (the D-optimal
 criterion, summed: −ln det of each fruit's position covariance after the view), counting
 only the fruit the view is predicted to see (in the image, outline not hidden by another
-fruit's: :mod:`bve_mj.estimation.visibility`). The highest J wins; a fruit hidden from every
+fruit's: :mod:`bve_mj.estimation.visibility`), each fruit's term scaled down near the
+directions from which a view predicted to show it did not measure it
+(:meth:`EveryFruitPlanner.note_hidden`: the tracks are spheres, and the stems, leaves and
+unripe fruit that hide a fruit are not in them). The highest J wins; a fruit hidden from every
 candidate is left to later views. Why not optimise J itself: each fruit's BVE problem is
 smooth and the arm's joint-space solver handles one look-at target; J over a truss is a sum
 of terms switched on and off by occlusion, which a local optimiser cannot follow.
@@ -20,7 +23,8 @@ Where a candidate's BVE view would not see the fruit it was planned for (behind 
 neighbours, as the tracks predict), ``unhide`` may offer a view from which it would
 (:mod:`bve_mj.planning.unhide`); it stands in for that BVE view and is scored the same way.
 
-The baselines (:class:`PatternPlanner`: random, circle, three fixed views) plan without the
+The baselines (:class:`bve_mj.planning.fruit_baselines.PatternPlanner`: random, circle, three
+fixed views) plan without the
 tracks' information: one single-target baseline planner, under the same constraints and the
 arm's reachability, aimed at the centre of the fruit found so far (the work zone's centre
 before any), its views planned for no fruit in particular (``planned_for`` = :data:`EXPLORE`).
@@ -51,7 +55,7 @@ __all__ = [
     "CandidateScore",
     "EveryFruitPlanner",
     "FruitTarget",
-    "PatternPlanner",
+    "LearnsWhereFruitHide",
     "PlansForEveryFruit",
     "ReportsCandidates",
     "information_gain",
@@ -137,6 +141,19 @@ class PlansForEveryFruit(Protocol):
     def note_explored(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None: ...
 
 
+@runtime_checkable
+class LearnsWhereFruitHide(Protocol):
+    """A planner told of each view the tracks predicted to show a fruit that did not measure
+    it (:meth:`EveryFruitPlanner.note_hidden`)."""
+
+    def note_hidden(self, fruit: int, p_world_camera: np.ndarray, p_world_fruit: np.ndarray) -> None: ...
+
+
+HIDDEN_WIDTH = 1.0 - np.cos(np.radians(15.0))
+"""How far a direction a fruit was hidden from reaches: a candidate view θ from it counts
+exp(-(1 - cos θ) / this) less of the fruit's gain (half at 13°)."""
+
+
 @dataclass
 class EveryFruitPlanner:
     """Views for every fruit (see the module docstring).
@@ -168,6 +185,7 @@ class EveryFruitPlanner:
         Callable[[FruitTarget, Sequence[FruitTarget], np.ndarray, np.ndarray | None], ViewPlan | None] | None
     ) = None
     _planners: dict[int, Planner] = field(default_factory=dict)
+    _hidden: dict[int, list[np.ndarray]] = field(default_factory=dict)  # directions fruit → camera
     last_scores: tuple[CandidateScore, ...] = ()
 
     def planner(self, fruit: int) -> Planner:
@@ -179,6 +197,22 @@ class EveryFruitPlanner:
     def forget(self, fruit: int) -> None:
         """Track ``fruit`` is gone (deleted or merged)."""
         self._planners.pop(fruit, None)
+        self._hidden.pop(fruit, None)
+
+    def note_hidden(self, fruit: int, p_world_camera: np.ndarray, p_world_fruit: np.ndarray) -> None:
+        """A view the tracks predicted to show ``fruit`` did not measure it: what hid it (a stem,
+        a leaf, an unripe fruit) is not in the prediction, and views from near that direction
+        are scored with less of its gain (:data:`HIDDEN_WIDTH`) until one measures it."""
+        d = np.asarray(p_world_camera, dtype=float) - np.asarray(p_world_fruit, dtype=float)
+        self._hidden.setdefault(fruit, []).append(d / max(float(np.linalg.norm(d)), 1e-9))
+
+    def _shown(self, fruit: int, p_world_camera: np.ndarray, p_world_fruit: np.ndarray) -> float:
+        """The share of ``fruit``'s gain a view from ``p_world_camera`` is counted with."""
+        if not self._hidden.get(fruit):
+            return 1.0
+        d = p_world_camera - p_world_fruit
+        cos = np.array(self._hidden[fruit]) @ (d / max(float(np.linalg.norm(d)), 1e-9))
+        return 1.0 - float(np.exp(-(1.0 - cos.max()) / HIDDEN_WIDTH))
 
     def set_configuration(self, q: np.ndarray) -> None:
         """Every fruit's planner plans the next move from the encoders' ``q``."""
@@ -192,6 +226,7 @@ class EveryFruitPlanner:
             p.note_failed_view(p_world_camera, p_world_target)
 
     def note_fused_view(self, fruit: int, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
+        self._hidden.pop(fruit, None)  # measured again: what hid it was that view's
         p = self._planners.get(fruit)
         if isinstance(p, LearnsFromFusedViews):
             p.note_fused_view(p_world_camera, p_world_target)
@@ -291,6 +326,7 @@ class EveryFruitPlanner:
             R = camera_rotation(plan.p_world_camera, plan.p_world_target)
             score = sum(
                 self.gain(f, plan.p_world_camera, R)
+                * self._shown(f.id, plan.p_world_camera, f.belief.centre_m)
                 for f, s in zip(fruits, sees, strict=True)
                 if s and not f.localised
             )
@@ -318,64 +354,3 @@ class EveryFruitPlanner:
             plan.p_world_camera, plan.p_world_target, plan.status, plan.feasible, plan.max_violation,
             plan.loss, plan.iterations, plan_s, plan.q,
         ), fruit  # fmt: skip
-
-
-@dataclass
-class PatternPlanner:
-    """A baseline for every fruit: one single-target baseline planner (random, circle, fixed
-    views) aimed at the centre of the fruit found so far, blind to their information.
-
-    Args:
-        planner: the single-target baseline (with the arm's reachability).
-        zone: the work zone's belief: its centre is the aim before any fruit is tracked, its
-            covariance the belief every plan is made for.
-    """
-
-    planner: Planner
-    zone: Belief
-    _aimed: Belief | None = field(default=None, init=False, repr=False)
-
-    def _aim(self, fruits: Sequence[FruitTarget]) -> Belief:
-        if not fruits:
-            return self.zone
-        centre = np.mean([f.belief.centre_m for f in fruits], axis=0)
-        return Belief(np.r_[centre, self.zone.mean[3:]], self.zone.cov)
-
-    def _plan(self, aim: Belief, p_world_camera: np.ndarray, iteration: int) -> ViewPlan:
-        plan = self.planner.plan(aim, p_world_camera, iteration)
-        if not (np.all(np.isfinite(plan.p_world_camera)) and np.all(np.isfinite(plan.p_world_target))):
-            raise BveError("the baseline's viewpoint is not finite")
-        return plan
-
-    def plan(
-        self,
-        fruits: Sequence[FruitTarget],
-        p_world_camera: np.ndarray,
-        iteration: int,
-        q: np.ndarray | None = None,
-    ) -> tuple[ViewPlan, int]:
-        """The baseline's next viewpoint, planned for no fruit (:data:`EXPLORE`)."""
-        self._aimed = self._aim(fruits)
-        return self._plan(self._aimed, p_world_camera, iteration), EXPLORE
-
-    def explore(
-        self, zone: Belief, p_world_camera: np.ndarray, iteration: int, q: np.ndarray | None = None
-    ) -> ViewPlan:
-        """The baseline's next viewpoint (it explores as it plans, aimed where it last was)."""
-        return self._plan(self._aimed or zone, p_world_camera, iteration)
-
-    def forget(self, fruit: int) -> None:
-        """Nothing to forget: the baseline keeps no per-fruit state."""
-
-    def set_configuration(self, q: np.ndarray) -> None:
-        if isinstance(self.planner, SyncsToEncoders):
-            self.planner.set_configuration(q)
-
-    def note_failed_view(self, fruit: int, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
-        """Ignored: the baseline does not learn from views."""
-
-    def note_fused_view(self, fruit: int, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
-        """Ignored: the baseline does not learn from views."""
-
-    def note_explored(self, p_world_camera: np.ndarray, p_world_target: np.ndarray) -> None:
-        """Ignored: the baseline does not learn from views."""
