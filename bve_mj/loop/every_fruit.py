@@ -178,13 +178,14 @@ def run_every_fruit(
         for e in step.events:
             if e.kind in ("deleted", "merged"):
                 planner.forget(e.track)
+        assigned = {tid for _, tid in step.assigned}
         for _, tid in step.assigned:
             if tid in alive:
                 planner.note_fused_view(tid, world.p_world_camera, tracker.track(tid).centre_m)
-        if target is not None and plan is not None and target not in {tid for _, tid in step.assigned}:
+        if target is not None and plan is not None and target not in assigned:
             planner.note_failed_view(target, world.p_world_camera, plan.p_world_target)
-        for tid in set(step.expected) - {tid for _, tid in step.assigned} & alive:
-            if isinstance(planner, LearnsWhereFruitHide):  # predicted to show it, it did not
+        if isinstance(planner, LearnsWhereFruitHide):  # predicted to show them, it did not
+            for tid in sorted(set(step.expected) - assigned & alive):
                 planner.note_hidden(tid, world.p_world_camera, tracker.track(tid).centre_m)
         info = world.view_info()
         here = world.p_world_camera
