@@ -347,6 +347,29 @@ def test_a_lone_red_sphere_keeps_its_accuracy(singles):
         assert det.range_m == pytest.approx(rho, rel=max(0.01, 1.0 / det.radius_px))
 
 
+def test_a_red_fruit_in_deep_shade_is_seen_and_noisy_dark_grey_is_not(singles):
+    """A low sun behind the canopy leaves a ripe fruit dark but red: a drawn scene's fruit had
+    values of 22-39 of 255 (RGB about (27, 2, 1)) with the camera's noise. The mask holds such
+    a fruit by its chroma and it is measured within tolerance, where a value floor of 40
+    loses most of it and refuses it; dark grey with the same noise stays out of the mask (a
+    few lone pixels, specks far below a blob) though noise gives its pixels every hue."""
+    rng = np.random.default_rng(5)
+    img, centre, radius, _ = singles.view(LONE, 0.3, 10, 5)
+    dark = np.clip(img * 0.25 + rng.normal(0.0, 3.0, img.shape), 0, 255).astype(np.uint8)
+    disc = _discs(img.shape[:2], [((int(centre[0]), int(centre[1])), int(radius) - 2)]) > 0
+    assert np.median(cv2.cvtColor(dark, cv2.COLOR_RGB2HSV)[disc][:, 2]) < 32
+    assert (ripe_mask(dark, DetectorConfig()) > 0)[disc].mean() > 0.8
+    assert verdict(detect(dark, INTRINSICS, PRIOR, MEAS, predicted_px=centre), centre, radius) == "measured"
+    floor_40 = DetectorConfig(min_value=40, min_chroma=0)
+    assert (ripe_mask(dark, floor_40) > 0)[disc].mean() < 0.5
+    assert isinstance(detect(dark, INTRINSICS, PRIOR, MEAS, floor_40, predicted_px=centre), NoDetection)
+    grey = np.clip(np.full(img.shape, 20.0) + rng.normal(0.0, 3.0, img.shape), 0, 255).astype(np.uint8)
+    hue = cv2.cvtColor(grey, cv2.COLOR_RGB2HSV)[:, :, 0]
+    assert ((hue <= 8) | (hue >= 170)).mean() > 0.1  # noise gives grey a red hue
+    specks = cv2.connectedComponentsWithStats(ripe_mask(grey, DetectorConfig()))[2][1:, cv2.CC_STAT_AREA]
+    assert specks.sum() < 1e-4 * grey[:, :, 0].size and (specks < DetectorConfig().min_area_px).all()
+
+
 def test_the_expected_size_rejects_an_implausible_fit(singles):
     img, centre, radius, _ = singles.view(LONE, 0.3, 10, 5)
     det = detect(img, INTRINSICS, PRIOR, MEAS, predicted_px=centre, expected_radius_px=radius)

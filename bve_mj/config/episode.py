@@ -44,7 +44,17 @@ class DetectorConfig:
     red_hue_max: int = field(default=8, metadata=_why("ripe red: OpenCV hue <= this or >= red_hue_min_wrap"))
     red_hue_min_wrap: int = field(default=170, metadata=_why("ripe red wraps around hue 180"))
     min_saturation: int = field(default=110, metadata=_why("excludes pinkish highlights and grey", "0-255"))
-    min_value: int = field(default=40, metadata=_why("excludes deep shadow", "0-255"))
+    min_value: int = field(
+        default=16, metadata=_why("excludes black: the darkest pixel that can be ripe", "0-255")
+    )
+    min_chroma: int = field(
+        default=17,
+        metadata=_why(
+            "a ripe pixel's colour stands this far out of grey (max - min of R, G, B): a red fruit "
+            "in the canopy's shade is dark but red, where camera noise gives dark grey any hue",
+            "0-255",
+        ),
+    )
     min_area_px: int = field(default=25, metadata=_why("smaller blobs are noise", "px"))
     min_boundary_points: int = field(default=12, metadata=_why("fewest silhouette points for a fit"))
     outlier_px: float = field(
@@ -182,7 +192,14 @@ class DetectorConfig:
             raise ConfigError("detector.miss_p", self.miss_p, "a probability in [0, 1]")
         if not 0.0 <= _number("detector", "false_positives", self.false_positives) <= 100.0:
             raise ConfigError("detector.false_positives", self.false_positives, "a number in [0, 100]")
-        for name in ("red_hue_max", "red_hue_min_wrap", "min_saturation", "min_value", "extend_hue_max"):
+        for name in (
+            "red_hue_max",
+            "red_hue_min_wrap",
+            "min_saturation",
+            "min_value",
+            "min_chroma",
+            "extend_hue_max",
+        ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 255:
                 raise ConfigError(f"detector.{name}", v, "an integer in [0, 255]")
