@@ -334,6 +334,43 @@ def test_ready_pose_search_screens_starts_without_changing_its_answer(upright):
     assert found >= 10
 
 
+def test_the_ready_pose_sees_the_target_its_first_detection_was_of():
+    """The detection prior is a first detection of the target from the ready pose, so that
+    pose must see it. With a ripe fruit 65 mm in front of the target on the line of sight of
+    the ready pose it would have had (a fruit hidden behind its neighbour: the neighbour
+    would have been detected), the ready pose looks from another direction, one that sees the
+    target, and the prior's ray passes through it. The cube prior (nothing detected) keeps
+    the pose, from which the target is hidden; so does the detection prior where no pose the
+    search reaches sees it (seed 0: only the highest directions keep off the joint limits)."""
+    from bve_mj.loop.mujoco import episode_settings
+    from bve_mj.loop.start import START_VISIBLE_SHARE, _sees_fruit, start_episode
+
+    target = Fruit("target", np.array([0.42, 0.0, 0.25]), 0.03, "red")
+    detection = episode_settings(CAMERA)
+    cube = with_overrides(detection, episode={"prior": "cube"})
+    moved = 0
+    for seed in range(4):
+        alone = start_episode(cube, seed, target=target, distractors=(), leaves=False)
+        assert alone.q_start is not None
+        los = alone.kin.camera_pose(alone.q_start)[0] - target.centre_m
+        front = (Fruit("front", target.centre_m + 0.065 * los / np.linalg.norm(los), 0.03, "red"),)
+        hidden = start_episode(cube, seed, target=target, distractors=front, leaves=False)
+        sees = _sees_fruit(hidden.model, hidden.kin, target)
+        np.testing.assert_array_equal(hidden.q_start, alone.q_start)
+        assert not sees(alone.q_start)
+        start = start_episode(detection, seed, target=target, distractors=front, leaves=False)
+        if seed == 0:
+            np.testing.assert_array_equal(start.q_start, alone.q_start)
+            continue
+        assert start.q_start is not None and sees(start.q_start)
+        p_camera = start.kin.camera_pose(start.q_start)[0]
+        ray = (target.centre_m - p_camera) / np.linalg.norm(target.centre_m - p_camera)
+        offset = start.prior.mean[:3] - target.centre_m
+        assert np.linalg.norm(offset - (offset @ ray) * ray) < target.radius_m  # on the ray, near its centre
+        moved += not np.allclose(start.q_start, alone.q_start)
+    assert moved == 3 and 0.5 < START_VISIBLE_SHARE < 1.0
+
+
 class _Scripted:
     """A world that measures, view after view, the listed points directly (1 mm noise)."""
 
