@@ -325,7 +325,8 @@ def start_episode(
     """The seeded scene, the ready pose and the prior of an episode with the resolved settings
     ``s`` (``target``/``distractors``/``leaves``/``edit``: see
     :func:`bve_mj.loop.mujoco.run_mujoco_episode`). A bad noise model file fails here,
-    before any work."""
+    before any work. With the detection prior (one target), the ready pose sees the target
+    where one the search reaches does (:data:`START_VISIBLE_SHARE`)."""
     ep = s.episode
     noise = None
     if s.filter.state == "centre_radius":
@@ -333,7 +334,8 @@ def start_episode(
         noise.check_camera(s.camera, s.measurement.noise_model)
     scene_ss, prior_ss, sensor_ss, planner_ss, fault_ss = np.random.SeedSequence(seed).spawn(5)
     kin = arm_kinematics(s.robot.name, s.robot.limit_set)
-    if target is None and distractors is None and edit is None:
+    kept = target is None and distractors is None and edit is None
+    if kept:
         model, info = _compiled_scene(s, kin, seed, scene_ss, leaves)
     else:  # a scripted scene: built for this episode alone
         spec, info = build_scene(
@@ -350,10 +352,7 @@ def start_episode(
     streams = (sensor_ss, planner_ss, fault_ss)
     sees = None
     if ep.prior == "detection" and s.tracking.fruits == "target":
-        scene_key = (
-            (s.scene, seed, leaves) if target is None and distractors is None and edit is None else object()
-        )
-        sees = (scene_key, _sees_fruit(model, kin, info.target))
+        sees = ((s.scene, seed, leaves) if kept else object(), _sees_fruit(model, kin, info.target))
     try:
         q_start = _ready_pose(s, kin, coarse, prior_rng, sees)
     except PlanningError:  # the fruit is out of the arm's reach: a clear outcome, not a crash
