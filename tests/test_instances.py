@@ -505,6 +505,9 @@ def test_detector_config_validates_the_new_settings():
             DetectorConfig(ambiguity_ratio=bad)
     with pytest.raises(ConfigError, match=r"detector\.extend_hue_max"):
         DetectorConfig(extend_hue_max=300)
+    for bad in (-1, 256, 17.5, True):
+        with pytest.raises(ConfigError, match=r"detector\.min_chroma"):
+            DetectorConfig(min_chroma=bad)
     for bad in (-1.0, float("nan"), "80"):
         with pytest.raises(ConfigError, match=r"detector\.interior_edge"):
             DetectorConfig(interior_edge=bad)
