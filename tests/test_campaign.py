@@ -313,6 +313,13 @@ def test_results_page_numbers_come_from_its_campaigns(tmp_path: Path) -> None:
     e1 = next(c for c in summary["cells"] if c["label"] == "synthetic E1 bve range e0=0.15 m")
     row = next(line for line in page.splitlines() if line.startswith("| E1 | dispersion"))
     assert f"| {e1['euclid_mean_mm']:.1f} |" in row and "| 37.1 | 15.5 |" in row
+    # the baselines' table holds every baseline the campaign ran, fixed views too
+    fixed = next(c for c in summary["cells"] if c["label"] == "synthetic E1 fixed range e0=0.15 m")
+    assert "| exp | BVE | random | circle | fixed | BVE best? |" in page
+    against = next(
+        line for line in page.splitlines() if line.startswith(f"| E1 | {e1['euclid_mean_mm']:.1f} |")
+    )
+    assert f"| {fixed['euclid_mean_mm']:.1f} | " in against
     # a second call resumes everything: nothing is recomputed
     assert main(argv) == 0
     assert "0 computed in this call" in (docs / "results.md").read_text()

@@ -210,8 +210,9 @@ def build_results_page(
         ]
     md += ["## 3. The BVE against the baselines", ""]
     md += [
-        "Mean Euclidean error [mm] of the BVE and of two baselines under the same constraints and step "
-        "limit: `random` (a random feasible viewpoint within the step) and `circle` (orbit the estimate). "
+        "Mean Euclidean error [mm] of the BVE and of three baselines under the same constraints and step "
+        "limit: `random` (a random feasible viewpoint within the step), `circle` (orbit the estimate) and "
+        "`fixed` (three fixed views, the closest published monocular method's protocol). "
         "Runs are paired: run i has the same fruit, prior and noise draws in every column.",
         "",
         "### Synthetic, range-only",

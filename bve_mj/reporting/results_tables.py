@@ -96,24 +96,23 @@ def _paper_table(syn: Summaries, muj: Summaries, o: PageOptions) -> list[str]:
 
 
 def _baseline_table(summ: Summaries, world: str, measurement: str, o: PageOptions) -> list[str]:
+    baselines = ("random", "circle", "fixed")
     lines = [
-        "| exp | BVE | random | circle | BVE best? |",
-        "|---|---|---|---|---|",
+        "| exp | BVE | " + " | ".join(baselines) + " | BVE best? |",
+        "|---|---|" + "---|" * len(baselines) + "---|",
     ]
     wins = 0
+    digits = ".1f" if measurement == "range" else ".2f"
     for name in o.experiments:
         vals = {
             p: _find(summ, experiment=name, planner=p, measurement=measurement).get("euclid_mean_mm")
-            for p in ("bve", "random", "circle")
+            for p in ("bve", *baselines)
         }
-        b, r, c = (np.inf if v is None else float(v) for v in vals.values())
-        best = bool(np.isfinite(b) and b <= min(r, c))
-        wins += bool(best)
-        digits = ".1f" if measurement == "range" else ".2f"
-        lines.append(
-            f"| {name} | {_fmt(vals['bve'], digits)} | {_fmt(vals['random'], digits)} "
-            f"| {_fmt(vals['circle'], digits)} | {'yes' if best else 'no'} |"
-        )
+        b, *others = (np.inf if v is None else float(v) for v in vals.values())
+        best = bool(np.isfinite(b) and b <= min(others))
+        wins += best
+        cells = " | ".join(_fmt(vals[p], digits) for p in ("bve", *baselines))
+        lines.append(f"| {name} | {cells} | {'yes' if best else 'no'} |")
     lines.append(
         f"\nBVE has the lowest mean error in {wins} of {len(o.experiments)} experiments "
         f"({world}, {measurement})."
