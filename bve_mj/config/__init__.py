@@ -24,7 +24,8 @@ section owning them are still read, with a warning (:mod:`.moved`).
 
 from __future__ import annotations
 
-from bve_mj.config.episode import DetectorConfig, EpisodeConfig, FaultConfig
+from bve_mj.config.detector import DetectorConfig
+from bve_mj.config.episode import EpisodeConfig, FaultConfig
 from bve_mj.config.fields import (
     ConstraintName,
     DetectorKind,

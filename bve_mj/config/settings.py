@@ -23,7 +23,8 @@ from typing import Any, Literal, get_args
 
 import numpy as np
 
-from bve_mj.config.episode import DetectorConfig, EpisodeConfig, FaultConfig
+from bve_mj.config.detector import DetectorConfig
+from bve_mj.config.episode import EpisodeConfig, FaultConfig
 from bve_mj.config.fields import WorldName
 from bve_mj.config.moved import MOVED_KEYS, move_keys
 from bve_mj.config.planning import ConstraintConfig, PlannerConfig, ProtocolConfig, RobotConfig
