@@ -353,3 +353,47 @@ def test_the_loop_tells_the_planner_which_views_the_tracks_misjudged_and_from_wh
     assert run_every_fruit(_Stem([CENTRE, beside]), _Planner(), Tracker(cfg, CENTRE, PRIOR,
                            filter_update("ekf", 10), visible), 12, 0.002, 3, zone=zone).views  # fmt: skip
     assert res.views
+
+
+def test_a_track_deleted_in_the_view_that_missed_it_is_not_reported_hidden():
+    """A false detection seen in the first view only starts a track the later views predict
+    to show and miss until it is deleted; in the view that deletes it, it was expected and
+    not measured, but it is gone: the loop reports only live tracks (without that filter it
+    asks the tracker for the deleted one and stops with a KeyError)."""
+    ghost = CENTRE + np.array([0.0, -0.09, 0.05])
+
+    class _Ghost(_World):
+        views = 0
+
+        def observe_all(self):
+            out, model = super().observe_all()
+            self.views += 1
+            if self.views == 1:
+                out = [*out, Sighting(model.predict(np.r_[ghost, RADIUS]), model)]
+            return out, model
+
+    class _Learns(_Planner):
+        def __init__(self):
+            super().__init__()
+            self.hidden = []
+
+        def plan(self, fruits, p_world_camera, iteration, q=None):  # always the real fruit
+            return self._at(CENTRE), min(f.id for f in fruits)
+
+        def note_hidden(self, fruit, p_world_camera, p_world_fruit):
+            self.hidden.append(fruit)
+
+    cfg = TrackingConfig(fruits="all", zone_m=0.3, explore_span_deg=0.0, zone_framed_share=0.0)
+
+    def visible(c, r, m):
+        return visible_arc_deg(c, r, m.p_world_camera, m.R_world_camera, F, W, H) >= 150.0
+
+    planner = _Learns()
+    tracker = Tracker(cfg, CENTRE, PRIOR, filter_update("ekf", 10), visible)
+    zone = Belief(np.r_[CENTRE, PRIOR[0]], np.diag([0.15**2] * 3 + [PRIOR[1] ** 2]))
+    res = run_every_fruit(_Ghost([CENTRE]), planner, tracker, 16, 0.002, 3, zone=zone)
+    deleted = {e.track for v in res.views for e in v.tracking.events if e.kind == "deleted"}
+    assert deleted, "the ghost's track was never deleted"
+    last = next(v for v in res.views if any(e.kind == "deleted" for e in v.tracking.events))
+    assert deleted <= set(last.tracking.expected)  # expected, missed and deleted in one view
+    assert set(planner.hidden) & deleted  # its misses before the deletion were reported

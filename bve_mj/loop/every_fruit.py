@@ -185,7 +185,7 @@ def run_every_fruit(
         if target is not None and plan is not None and target not in assigned:
             planner.note_failed_view(target, world.p_world_camera, plan.p_world_target)
         if isinstance(planner, LearnsWhereFruitHide):  # predicted to show them, it did not
-            for tid in sorted(set(step.expected) - assigned & alive):
+            for tid in sorted((set(step.expected) - assigned) & alive):
                 planner.note_hidden(tid, world.p_world_camera, tracker.track(tid).centre_m)
         info = world.view_info()
         here = world.p_world_camera
