@@ -4,6 +4,7 @@ JSON; bad input."""
 from __future__ import annotations
 
 import json
+import math
 
 import mujoco
 import numpy as np
@@ -50,19 +51,23 @@ def test_the_scenes_outside_the_suite_load_each_described_and_compile(folder, co
 def test_a_neighbour_localised_in_place_of_a_hidden_target_is_not_claimed():
     """A flat beefsteak cluster (``stress/flat_beefsteak_cluster``, episode 2946969758): the
     target hides behind a red neighbour 62 mm nearer along the first detection's ray, beyond
-    the prior's declared ±50 mm; the views measure and localise the neighbour to a
-    millimetre. The episode must not claim it: ``ambiguous``, not ``converged`` (it did, 67.5
-    mm off, NEES 30,872, before the prior's bound was checked), the last view's event
-    ``outside_prior_bound`` saying why."""
+    the prior's declared ±50 mm. The episode must not claim the neighbour: when the views
+    localise it (they did, to a millimetre, when this was written), ``ambiguous``, not
+    ``converged`` (it was, 67.5 mm off, NEES 30,872, before the prior's bound was checked),
+    the last view's event ``outside_prior_bound`` saying why; when they do not (since the
+    detector groups a flat fruit's arcs with its shape undone they say ``ambiguous: two
+    fruit fit`` view after view), an outcome that does not exit 0 either."""
     (scenario,) = load_suite(STRESS, only=["flat_beefsteak_cluster"])
     ep = run_mujoco_episode(scenario.settings(), 2946969758)
     final, outcome = ep.result.final, ep.result.outcome
     error_mm = 1e3 * float(np.linalg.norm(final.centre_m - ep.truth))
     assert not (outcome.success and final.mahalanobis_sq(ep.truth) > SILENT_NEES)
-    if error_mm > 20.0:  # the neighbour, as when this was written
-        assert outcome == "ambiguous"
-        said = ep.to_json()["views"][-1]["events"]  # and its JSON says why
-        assert any(e.startswith("outside_prior_bound") for e in said), said
+    if error_mm > 20.0:  # the neighbour, or nothing
+        assert outcome in ("ambiguous", "unreliable")
+        if 1e3 * math.sqrt(max(np.linalg.eigvalsh(final.cov[:3, :3]))) < 10.0:  # the neighbour, localised
+            assert outcome == "ambiguous"
+            said = ep.to_json()["views"][-1]["events"]  # and its JSON says why
+            assert any(e.startswith("outside_prior_bound") for e in said), said
 
 
 @pytest.mark.parametrize("name", sorted(REQUIRED))

@@ -16,7 +16,7 @@ Frames: the paper's camera frame (x optical axis, y left, z up); pixels u right,
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +24,7 @@ import numpy as np
 from bve_mj.config import DetectorConfig, FruitPrior, MeasurementConfig
 from bve_mj.perception.association import _Blob, _blobs, _inside, _nearby
 from bve_mj.perception.detection import Detection, Intrinsics
-from bve_mj.perception.instances import Arc, FruitOutline, group_arcs, outline_arcs
+from bve_mj.perception.instances import Arc, FruitOutline, fruit_stretch, group_arcs, outline_arcs
 from bve_mj.perception.masks import _check_image, ripe_mask
 from bve_mj.perception.outline_fit import measurable_fruit, measure_outline
 from bve_mj.perception.rims import interior_arcs, interior_edges
@@ -107,7 +107,11 @@ def detect_all(
     if cfg.interior_edge > 0.0:  # rims over a ripe neighbour: edges inside the mask
         chains = interior_edges(image_rgb, mask, cfg.interior_edge)
         rims = interior_arcs(chains, [b.outline for b in every])
-    for outline, seen in _every_fruit(every, mask.shape, cfg, fruit.shape_spread_rel, rims):
+
+    def stretch(at_px: np.ndarray) -> np.ndarray | None:
+        return fruit_stretch(intrinsics, up_camera, fruit.shape_index, at_px)
+
+    for outline, seen in _every_fruit(every, mask.shape, cfg, fruit.shape_spread_rel, rims, stretch):
         det = measure_outline(
             outline, seen, every, mask, (0, 0), intrinsics, fruit, measurement, cfg, up_camera=up_camera
         )
@@ -126,10 +130,13 @@ def _every_fruit(
     cfg: DetectorConfig,
     shape_rel: float,
     rims: Sequence[Arc] = (),
+    stretch: Callable[[np.ndarray], np.ndarray | None] | None = None,
 ) -> list[tuple[FruitOutline, float]]:
     """The fruit in the ripe blobs ``every`` (of a mask of ``shape`` (H, W)), each once, with
     the degrees of its outline seen; longest outline first. ``rims``: interior arcs (edges
     inside the mask), each numbered by its blob in ``every``; they join a blob's arcs.
+    ``stretch(at_px)``: the map under which a fruit near that pixel is a circle
+    (:func:`~bve_mj.perception.instances.fruit_stretch`), taken at each blob's centre.
 
     Each blob of at least ``cfg.min_area_px``, largest first, is taken with its neighbouring
     fragments as ``detect`` takes the blob its prediction falls on, their arcs grouped into
@@ -160,7 +167,12 @@ def _every_fruit(
         if not seeds or all(id(a) in claimed for a in seeds):
             continue
         near = [index[id(b)] for b in _nearby(every, every[k])]
-        found = group_arcs([a for j in near for a in arcs(j)], tol_px=cfg.arc_tol_px, shape_rel=shape_rel)
+        found = group_arcs(
+            [a for j in near for a in arcs(j)],
+            tol_px=cfg.arc_tol_px,
+            shape_rel=shape_rel,
+            stretch=None if stretch is None else stretch(every[k].centroid),
+        )
         w, p = measurable_fruit(found, cfg.min_arc_deg)
         for fr, seen in w + p:
             if k in fr.blobs:

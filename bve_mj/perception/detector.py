@@ -46,7 +46,7 @@ from bve_mj.perception.association import (
     _shifted,
 )
 from bve_mj.perception.detection import Detection, Intrinsics, NoDetection, Prediction
-from bve_mj.perception.instances import Arc, group_arcs, outline_arcs
+from bve_mj.perception.instances import Arc, fruit_stretch, group_arcs, outline_arcs
 from bve_mj.perception.masks import _check_image, ripe_mask
 from bve_mj.perception.outline_fit import measurable_fruit, measure_outline
 from bve_mj.perception.rims import interior_arcs, interior_edges
@@ -148,9 +148,11 @@ def detect(
     # a fruit that is not a sphere is not a circle in the image: its outline lies inside
     # the circle through its widest parts by up to the prior's shape spread (apparent
     # radius ±s); the arcs inside by that much are still its own, count as seen, and the
-    # fit's own uncertainty may be larger by a share of it
+    # fit's own uncertainty may be larger by a share of it. Where the vertical is known the
+    # arcs are grouped with the fruit's mean shape undone (an ellipse made a circle)
     shape = fruit.shape_spread_rel
-    found = group_arcs(arcs, tol_px=cfg.arc_tol_px, shape_rel=shape)
+    stretch = fruit_stretch(intrinsics, up_camera, fruit.shape_index, target.centroid)
+    found = group_arcs(arcs, tol_px=cfg.arc_tol_px, shape_rel=shape, stretch=stretch)
     if not found:
         return NoDetection("no stretch of the ripe blob's outline is a circle arc (no fruit silhouette)")
     # a fruit that shows enough of its outline can be measured; one that shows less is

@@ -1,9 +1,12 @@
 """Instance separation of the ripe mask: which outline points belong to which fruit.
 
 The tomatoes of a truss touch, so one ripe blob is usually several fruit, and one fruit can
-be several blobs (a stem across it, uneven colour). Each fruit's silhouette is a circle in
-the image (an ellipse off-axis, close enough to group points by), and the outline of a
-union of overlapping circles turns inwards wherever two of them meet. So:
+be several blobs (a stem across it, uneven colour). Each fruit's silhouette is an ellipse in
+the image, and a circle once the fruit's mean shape is undone (where the world's vertical is
+known, the points are scaled along its image by the fruit type's apparent elongation:
+:func:`fruit_stretch`; a plum tomato is 1.2-1.6 times as tall as wide, and circles cut it in
+two, one through each end); the outline of a union of overlapping circles turns inwards
+wherever two of them meet. So:
 
 1. every blob's outline is cut into arcs at its concave corners (recursively into the
    pockets between the outline and its convex hull), at its sharp corners (where the
@@ -35,12 +38,14 @@ centres: OpenCV's indices + 0.5).
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
 
+from bve_mj.perception.detection import Intrinsics
 from bve_mj.perception.outline_cuts import Arc, _median, concave_corners, outline_arcs, sharp_corners
 
 __all__ = [
@@ -49,6 +54,7 @@ __all__ = [
     "FruitOutline",
     "concave_corners",
     "fit_circle",
+    "fruit_stretch",
     "group_arcs",
     "hull_points",
     "outline_arcs",
@@ -129,6 +135,34 @@ def _shares(
     return on, out
 
 
+def fruit_stretch(
+    intrinsics: Intrinsics, up_camera: np.ndarray | None, shape_index: float, at_px: np.ndarray
+) -> np.ndarray | None:
+    """The linear map (2, 2) of image points that turns the silhouette of a spheroid fruit of
+    ``shape_index`` (height / width) hanging along ``up_camera`` (the world's vertical in
+    the camera frame), seen near pixel ``at_px``, into a circle: its outline is an ellipse,
+    its axis along the image of the vertical there and elongated by a = √(cos²φ + k² sin²φ)
+    (φ between the line of sight and the axis), and the map scales it by 1/a along that
+    direction (the equatorial radius unchanged). None where the vertical is not known or
+    the fruit is seen end-on (the outline a circle anyway)."""
+    if up_camera is None:
+        return None
+    up = np.asarray(up_camera, dtype=float)
+    n_up = float(np.linalg.norm(up))
+    if not (np.all(np.isfinite(up)) and n_up > 1e-9):
+        return None
+    up = up / n_up
+    ray = intrinsics.rays(np.asarray(at_px, dtype=float))[0]
+    d = intrinsics.project(ray + 1e-3 * up) - intrinsics.project(ray)
+    n_d = float(np.linalg.norm(d))
+    if not math.isfinite(n_d) or n_d < 1e-9:
+        return None
+    d /= n_d
+    cos_phi = float(np.clip(abs(ray @ up), 0.0, 1.0))
+    a = math.sqrt(cos_phi**2 + shape_index**2 * (1.0 - cos_phi**2))
+    return np.eye(2) + (1.0 / a - 1.0) * np.outer(d, d)
+
+
 def group_arcs(
     arcs: list[Arc],
     *,
@@ -136,8 +170,15 @@ def group_arcs(
     tol_rel: float = 0.04,
     shape_rel: float = 0.0,
     min_seed: int = 8,
+    stretch: np.ndarray | None = None,
 ) -> list[FruitOutline]:
     """Group convex arcs into fruit.
+
+    ``stretch``: a linear map (2, 2) of the points under which a fruit's outline is a circle
+    (:func:`fruit_stretch`: an elongated or flattened fruit is an ellipse in the image, and
+    the circle through one end of a plum tomato misses its sides, so circles alone cut it
+    in two); the arcs are grouped in the mapped points, and each fruit's circle is given
+    back in the image (its centre mapped back, its radius the equatorial one).
 
     The arc with the most points on its own circle seeds a fruit; arcs that lie on the
     fruit's circle (half their points or more within ``tol = max(tol_px, tol_rel·R)`` of it,
@@ -150,6 +191,18 @@ def group_arcs(
     can leave one fruit as two groups.
 
     Returns the fruit found, longest outline first."""
+    if stretch is not None:
+        M = np.asarray(stretch, dtype=float)
+        mapped = [replace(a, points=a.points @ M.T) for a in arcs]
+        found = group_arcs(mapped, tol_px=tol_px, tol_rel=tol_rel, shape_rel=shape_rel, min_seed=min_seed)
+        original = {id(m): a for m, a in zip(mapped, arcs, strict=True)}
+        inverse = np.linalg.inv(M)
+        return [
+            FruitOutline(
+                Circle(inverse @ fr.circle.centre, fr.circle.radius), tuple(original[id(a)] for a in fr.arcs)
+            )
+            for fr in found
+        ]
     # seeds in order of the points that lie on their own circle: a long arc that is half
     # an occluder's edge makes a poor seed
     scored: list[tuple[int, Arc, Circle | None]] = []

@@ -23,7 +23,7 @@ from bve_mj.perception.all_fruit import FruitDetections, Refusal
 from bve_mj.perception.association import _blobs
 from bve_mj.perception.detection import Detection, Intrinsics, NoDetection
 from bve_mj.perception.instance_choice import _check_request, _Instance, _pick
-from bve_mj.perception.instances import Arc, group_arcs, outline_arcs
+from bve_mj.perception.instances import Arc, fruit_stretch, group_arcs, outline_arcs
 from bve_mj.perception.outline_fit import measurable_fruit, measure_outline
 from bve_mj.perception.protocol import DetectionRequest
 
@@ -117,7 +117,11 @@ class MaskDetector:
             o = b.outline
             usable = (o[:, 0] > 0) & (o[:, 0] < W - 1) & (o[:, 1] > 0) & (o[:, 1] < H - 1)
             arcs += outline_arcs(o + 0.5, usable, k, corner_px=cfg.corner_px, margin=cfg.junction_margin)
-        found = group_arcs(arcs, tol_px=cfg.arc_tol_px, shape_rel=self.fruit.shape_spread_rel)
+        largest = max(blobs, key=lambda b: b.area)
+        stretch = fruit_stretch(intr, request.up_camera, self.fruit.shape_index, largest.centroid)
+        found = group_arcs(
+            arcs, tol_px=cfg.arc_tol_px, shape_rel=self.fruit.shape_spread_rel, stretch=stretch
+        )
         if not found:
             return NoDetection("no stretch of the mask's outline is a circle arc (no fruit silhouette)")
         whole, part = measurable_fruit(found, cfg.min_arc_deg)
