@@ -9,8 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
-from bve_mj.config import CameraConfig, FruitPrior, MeasurementConfig
-from bve_mj.perception import Intrinsics, all_fruit
+from bve_mj.config import CameraConfig, DetectorConfig, FruitPrior, MeasurementConfig
+from bve_mj.errors import ConfigError
+from bve_mj.perception import Intrinsics
 from bve_mj.perception.all_fruit import detect_all
 from bve_mj.perception.instances import fit_circle, fruit_stretch, group_arcs, outline_arcs
 from bve_mj.robot import ArmKinematics, get_robot
@@ -126,12 +127,12 @@ def plum_chain():
     probe.close()
 
 
-def _count(probe, fruits, prior):
+def _count(probe, fruits, prior, config=None):
     counts = {"measured": 0, "wrong": 0}
     for azimuth in (-30, 0, 30):
         for elevation in (-15, 10, 30):
             img, _, _, (p, R) = probe.view(fruits[2], 0.35, azimuth, elevation)
-            found = detect_all(img, INTRINSICS, prior, MeasurementConfig(), up_camera=R.T @ UP)
+            found = detect_all(img, INTRINSICS, prior, MeasurementConfig(), config, up_camera=R.T @ UP)
             truths = [INTRINSICS.project(R.T @ (f.centre_m - p)) for f in fruits]
             for det in found.detections:
                 off = min(np.linalg.norm(det.centre_px - t) for t in truths)
@@ -139,7 +140,7 @@ def _count(probe, fruits, prior):
     return counts
 
 
-def test_a_rendered_chain_of_plums_is_measured_fruit_by_fruit(plum_chain, monkeypatch):
+def test_a_rendered_chain_of_plums_is_measured_fruit_by_fruit(plum_chain):
     """Five touching plum tomatoes (shape index 1.4) in a chain, from nine directions at
     0.35 m: with the shape undone most fruit-views are measured (34 of 45 when written), as
     circles few (11: each plum cut in two, its parts refused as partial), and no more of
@@ -147,8 +148,13 @@ def test_a_rendered_chain_of_plums_is_measured_fruit_by_fruit(plum_chain, monkey
     most)."""
     probe, fruits, prior = plum_chain
     shaped = _count(probe, fruits, prior)
-    monkeypatch.setattr(all_fruit, "fruit_stretch", lambda *a, **k: None)
-    circles = _count(probe, fruits, prior)
+    circles = _count(probe, fruits, prior, DetectorConfig(shape_grouping=False))
     assert shaped["measured"] >= 0.6 * 5 * 9
     assert shaped["measured"] >= 2 * circles["measured"]
     assert shaped["wrong"] <= max(circles["wrong"], 2)
+
+
+def test_shape_grouping_is_validated():
+    for bad in ("yes", 1, None):
+        with pytest.raises(ConfigError, match=r"detector\.shape_grouping"):
+            DetectorConfig(shape_grouping=bad)

@@ -32,6 +32,7 @@ def _args(name: str, out: Path) -> list[str]:
         "headless_episode.py": ["2"],
         "paper_table.py": ["3"],  # runs per experiment (20 by default: 50 s)
         "pick_figure.py": ["9105", str(out)],
+        "plum_figure.py": [str(out)],
         "render_scene.py": ["4", str(out)],
         "rims_figure.py": ["4", str(out)],
         "sample_paths.py": [str(out)],
@@ -48,6 +49,7 @@ def test_every_example_is_listed():
         "headless_episode.py",
         "paper_table.py",
         "pick_figure.py",
+        "plum_figure.py",
         "render_scene.py",
         "rims_figure.py",
         "sample_paths.py",
@@ -72,6 +74,7 @@ def test_examples_leave_the_checkout_clean(tmp_path):
     assert (tmp_path / "approach_video" / "approach.mp4").stat().st_size > 0
     assert (tmp_path / "render_scene" / "greenhouse.png").is_file()
     assert (tmp_path / "rims_figure" / "rims.png").is_file()
+    assert (tmp_path / "plum_figure" / "plum_chain.png").is_file()
     assert (tmp_path / "sample_paths" / "sample_paths.png").is_file()
     assert (tmp_path / "unhide_figure" / "unhide.png").is_file()
     assert (tmp_path / "campaign" / "campaign" / "summary.json").is_file()

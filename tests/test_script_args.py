@@ -23,6 +23,7 @@ BAD = {
     "examples/headless_episode.py": (["-1"], "seed"),
     "examples/paper_table.py": (["zero"], "runs"),
     "examples/pick_figure.py": (["9105", "README.md"], "out_dir"),
+    "examples/plum_figure.py": (["README.md/x"], "out_dir"),
     "examples/render_scene.py": (["4.5"], "seed"),
     "examples/rims_figure.py": (["4", "README.md/x"], "out_dir"),
     "examples/sample_paths.py": (["pyproject.toml"], "out_dir"),

@@ -103,6 +103,14 @@ class DetectorConfig:
             ">= 0",
         ),
     )
+    shape_grouping: bool = field(
+        default=True,
+        metadata=_why(
+            "group outline arcs into fruit with the fruit type's mean shape undone where the world's "
+            "vertical is known (its silhouette, an ellipse, made a circle: a plum is 1.2-1.6 times as "
+            "tall as wide); false: as circles, which cut an elongated fruit in two"
+        ),
+    )
     min_arc_deg: float = field(
         default=150.0,
         metadata=_why("fewest degrees of the target's outline seen (after trimming) to measure it", "deg"),
@@ -212,6 +220,8 @@ class DetectorConfig:
         _positive_int("detector", "junction_margin", self.junction_margin)
         _positive("detector", "arc_tol_px", self.arc_tol_px)
         _non_negative("detector", "interior_edge", self.interior_edge)
+        if not isinstance(self.shape_grouping, bool):
+            raise ConfigError("detector.shape_grouping", self.shape_grouping, "true or false")
         _open_interval("detector", "min_arc_deg", self.min_arc_deg, 0.0, 360.0, "a number in (0, 360)")
         _positive("detector", "max_fit_rms_px", self.max_fit_rms_px)
         _positive("detector", "max_fit_sigma_px", self.max_fit_sigma_px)

@@ -109,7 +109,8 @@ def detect_all(
         rims = interior_arcs(chains, [b.outline for b in every])
 
     def stretch(at_px: np.ndarray) -> np.ndarray | None:
-        return fruit_stretch(intrinsics, up_camera, fruit.shape_index, at_px)
+        up = up_camera if cfg.shape_grouping else None
+        return fruit_stretch(intrinsics, up, fruit.shape_index, at_px)
 
     for outline, seen in _every_fruit(every, mask.shape, cfg, fruit.shape_spread_rel, rims, stretch):
         det = measure_outline(

@@ -151,7 +151,8 @@ def detect(
     # fit's own uncertainty may be larger by a share of it. Where the vertical is known the
     # arcs are grouped with the fruit's mean shape undone (an ellipse made a circle)
     shape = fruit.shape_spread_rel
-    stretch = fruit_stretch(intrinsics, up_camera, fruit.shape_index, target.centroid)
+    up = up_camera if cfg.shape_grouping else None
+    stretch = fruit_stretch(intrinsics, up, fruit.shape_index, target.centroid)
     found = group_arcs(arcs, tol_px=cfg.arc_tol_px, shape_rel=shape, stretch=stretch)
     if not found:
         return NoDetection("no stretch of the ripe blob's outline is a circle arc (no fruit silhouette)")

@@ -118,7 +118,8 @@ class MaskDetector:
             usable = (o[:, 0] > 0) & (o[:, 0] < W - 1) & (o[:, 1] > 0) & (o[:, 1] < H - 1)
             arcs += outline_arcs(o + 0.5, usable, k, corner_px=cfg.corner_px, margin=cfg.junction_margin)
         largest = max(blobs, key=lambda b: b.area)
-        stretch = fruit_stretch(intr, request.up_camera, self.fruit.shape_index, largest.centroid)
+        up = request.up_camera if cfg.shape_grouping else None
+        stretch = fruit_stretch(intr, up, self.fruit.shape_index, largest.centroid)
         found = group_arcs(
             arcs, tol_px=cfg.arc_tol_px, shape_rel=self.fruit.shape_spread_rel, stretch=stretch
         )
