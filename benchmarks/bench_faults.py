@@ -21,10 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from bve_mj.campaigns.runner import run_campaign
-from bve_mj.campaigns.scenarios import SILENT_NEES, load_suite
+from bve_mj.campaigns.scenarios import SILENT_PROBABILITY, load_suite
 from bve_mj.campaigns.spec import CampaignSpec
 from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import load_settings
+from bve_mj.estimation.claim_shape import claim_region
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.threads import one_blas_thread
 
@@ -71,7 +72,10 @@ def _line(name: str, rows: list[dict], min_radius_m: float) -> None:
     nan = sum(not r.get("belief_finite", True) for r in ok)
     limit = sum(r.get("joint_limit_violation_rad", 0.0) > 1e-3 for r in ok)
     inside = sum(r.get("min_camera_fruit_distance_m", math.inf) <= min_radius_m for r in ok)
-    silent = sum(Outcome(r["outcome"]).success and r["nees"] > SILENT_NEES for r in ok)
+    silent = sum(
+        Outcome(r["outcome"]).success and r["nees"] > claim_region(r.get("claim_dof"), SILENT_PROBABILITY)
+        for r in ok
+    )
     err = np.array([r["error_mm"] for r in ok]) if ok else np.array([math.nan])
     outcomes: dict[str, int] = {}
     for r in rows:

@@ -164,11 +164,17 @@ def test_the_claims_tail_scale_holds_the_errors_tail(rng, heavy):
             out.append(r)
         rows = out
     model, _ = fit_noise_model(rows, CameraConfig(), "test")
+    shape = model.claim_shape
     if heavy:
         assert model.tail_scale > 3.0
+        # the second moment is far inside the tail: a Student-t claim of few dof
+        assert shape.bound_scale > 2.0 and shape.dof < 10.0
     else:
         assert 1.0 <= model.tail_scale < 2.0
+        assert shape.bound_scale < 2.0  # nearly Gaussian
+    assert 0.0 < model.moment_scale <= model.tail_scale
     assert model.view_tail_scale >= 1.0  # single views' (size-only episodes claim with it)
+    assert 0.0 < model.view_moment_scale <= model.view_tail_scale
 
 
 def test_the_tail_draws_count_views_from_one_place_as_the_share_they_add(rng):
@@ -541,3 +547,24 @@ def test_calibrate_every_fruit_adds_the_neighbours_rows(tmp_path, capsys):
     target = [r for r in doc["rows"] if r.get("source") != "every"]
     alone, _ = fit_noise_model(target, CameraConfig(), model.source)
     assert alone.centre_var_px2 == model.centre_var_px2
+
+
+def test_the_claims_moment_scale_is_validated_and_read_back(tmp_path):
+    """A model whose claim's second moment exceeds its tail scale is refused by name; one
+    that does not give it (files made before) claims Gaussian, as before; a written model
+    reads back with its shape."""
+    from dataclasses import replace
+
+    model = load_noise_model("default")
+    assert 1.0 < model.claim_shape.bound_scale == pytest.approx(model.tail_scale / model.moment_scale)
+    with pytest.raises(ValueError, match="moment_scale"):
+        replace(model, moment_scale=2.0 * model.tail_scale)
+    with pytest.raises(ValueError, match="view_moment_scale"):
+        replace(model, view_moment_scale=0.0)
+    assert replace(model, moment_scale=None).claim_shape.bound_scale == 1.0
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(model.to_json()), encoding="utf-8")
+    assert load_noise_model(str(path)).claim_shape == model.claim_shape
+    old = {k: v for k, v in model.to_json().items() if k not in ("moment_scale", "view_moment_scale")}
+    path.write_text(json.dumps(old), encoding="utf-8")
+    assert load_noise_model(str(path)).claim_shape.bound_scale == 1.0

@@ -465,6 +465,34 @@ def test_views_record_the_filters_own_belief_beside_a_wider_claim():
     assert plain.final_filter is plain.final
 
 
+def test_a_heavy_tailed_claim_changes_what_is_claimed_not_what_the_loop_decides():
+    """A claim's shape (a Student-t whose bound is ρ = 3 times its covariance) leaves every
+    view's belief, the loop's bound, as the Gaussian claim with the same tail scale has it;
+    the episode's claim is the bound's covariance over ρ, its NEES ρ times the bound's."""
+    from bve_mj.config import FilterConfig
+    from bve_mj.estimation.belief import Belief
+    from bve_mj.estimation.claim_shape import ClaimShape
+    from bve_mj.loop.claims import Claims
+    from bve_mj.loop.episode import run_episode
+
+    truth = np.array([0.40, 0.0, 0.20])
+    points = [truth + [0.001, -0.002, 0.0], truth + [-0.001, 0.001, 0.001], truth + [0.0, 0.001, -0.002]]
+    prior = Belief.isotropic(np.array([0.41, 0.0, 0.20]), 0.02)
+    cfg = FilterConfig()
+    shaped = run_episode(
+        _Scripted(points), _Still(), prior, cfg, steps=2, claims=Claims(tail_scale=4.0, shape=ClaimShape(3.0))
+    )
+    gaussian = run_episode(_Scripted(points), _Still(), prior, cfg, steps=2, claims=Claims(tail_scale=4.0))
+    assert shaped.outcome == gaussian.outcome
+    for v, g in zip(shaped.views, gaussian.views, strict=True):
+        np.testing.assert_array_equal(v.belief.mean, g.belief.mean)
+        np.testing.assert_array_equal(v.belief.cov, g.belief.cov)
+        np.testing.assert_allclose(shaped.claim(v).cov * 3.0, v.belief.cov)
+    assert shaped.shape == ClaimShape(3.0) and gaussian.shape.bound_scale == 1.0
+    assert shaped.final_claim.mahalanobis_sq(truth) == pytest.approx(3.0 * shaped.final.mahalanobis_sq(truth))
+    assert gaussian.final_claim is gaussian.final
+
+
 class _Listening(_Still):
     """A planner that records the views it is told failed."""
 

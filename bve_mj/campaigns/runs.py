@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -28,7 +29,7 @@ def _row(
     joint_violation_rad: float = 0.0,
     true_radius_m: float | None = None,
 ) -> dict[str, Any]:
-    final = result.final.position
+    final = result.final_claim.position
     d = final.mean - truth
     planned = result.views[1:]
     errors = [float(np.linalg.norm(v.belief.centre_m - truth)) * 1e3 for v in result.views]
@@ -51,6 +52,7 @@ def _row(
         "error_mm": float(np.linalg.norm(d)) * 1e3,
         "error_xyz_mm": (d * 1e3).tolist(),
         "nees": float(d @ np.linalg.solve(final.cov, d)),
+        "claim_dof": None if math.isinf(result.shape.dof) else result.shape.dof,
         "sigma_max_mm": float(np.sqrt(np.linalg.eigvalsh(final.cov)[-1])) * 1e3,
         "plan_ms_median": float(np.median([v.plan_s for v in planned])) * 1e3 if planned else 0.0,
         "plan_ms": [v.plan_s * 1e3 for v in planned],
@@ -74,7 +76,7 @@ def _row(
         "error_by_view_mm": errors,
         "camera_path_m": [v.p_world_camera.tolist() for v in result.views],
         "estimate_path_m": [v.belief.centre_m.tolist() for v in result.views],
-        **radius_metrics(result.final, true_radius_m),
+        **radius_metrics(result.final_claim, true_radius_m),
     }
 
 

@@ -118,7 +118,8 @@ def cmd_episode(args: argparse.Namespace) -> int:
         for v, rec in zip(doc["views"], result.result.views, strict=True):
             det = v.get("detection", {})
             shown = f"r {det['radius_px']:.1f} px" if "radius_px" in det else str(det.get("none", "-"))[:22]
-            r, sd = rec.belief.radius_m, rec.belief.radius_sigma_m
+            claim = result.result.claim(rec)
+            r, sd = claim.radius_m, claim.radius_sigma_m
             rho = (
                 None
                 if "angular_radius_rad" not in det
@@ -129,7 +130,7 @@ def cmd_episode(args: argparse.Namespace) -> int:
             true_range = float(np.linalg.norm(rec.p_world_camera - result.truth))
             print(
                 f"{v['view']:>4} {v['plan_status'] or 'start'!s:>13} {shown:>22} {measured} "
-                f"{true_range:6.3f} {v['error_mm']:8.2f} {1e3 * rec.belief.sigma_max_m:7.2f} {radius:>14}"
+                f"{true_range:6.3f} {v['error_mm']:8.2f} {1e3 * claim.sigma_max_m:7.2f} {radius:>14}"
             )
     radius = ""
     if doc["final_radius_mm"] is not None:

@@ -98,14 +98,27 @@ CONSISTENCY_LEVELS = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.97, 0.99, 0.999)
 """The p of the consistency curve: share of episodes inside the p-ellipsoid, against p."""
 
 
-def consistency_curve(nees: Sequence[float] | np.ndarray, dof: int = 3) -> list[tuple[float, float]]:
-    """(p, share of ``nees`` values inside the p-ellipsoid, NEES ≤ χ²_dof(p)) for each p of
-    :data:`CONSISTENCY_LEVELS`: an honest filter lies on the diagonal; below it, its
-    ellipsoids are too small (overconfident), above, too large."""
-    v = np.asarray([x for x in nees if np.isfinite(x)], dtype=float)
-    if v.size == 0:
+def consistency_curve(
+    nees: Sequence[float] | np.ndarray, dof: int = 3, tail_dofs: Sequence[float | None] | None = None
+) -> list[tuple[float, float]]:
+    """(p, share of ``nees`` values inside the p-region) for each p of
+    :data:`CONSISTENCY_LEVELS`: the p-ellipsoid, NEES ≤ χ²_dof(p), of a Gaussian claim; of a
+    Student-t claim of ν dof (``tail_dofs``, one per value, None for a Gaussian one) its
+    p-region under its covariance (:class:`~bve_mj.estimation.claim_shape.ClaimShape`). An
+    honest claim lies on the diagonal; below it, its regions are too small (overconfident),
+    above, too large."""
+    from bve_mj.estimation.claim_shape import claim_region
+
+    values = np.asarray(nees, dtype=float)
+    tails = [None] * values.size if tail_dofs is None else list(tail_dofs)
+    if len(tails) != values.size:
+        raise BveError(f"tail_dofs must give one dof per NEES value, got {len(tails)} for {values.size}")
+    kept = [(x, nu) for x, nu in zip(values, tails, strict=True) if np.isfinite(x)]
+    if not kept:
         return [(p, float("nan")) for p in CONSISTENCY_LEVELS]
-    return [(p, float(np.mean(v <= chi2_quantile(p, dof)))) for p in CONSISTENCY_LEVELS]
+    return [
+        (p, float(np.mean([x <= claim_region(nu, p, dof) for x, nu in kept]))) for p in CONSISTENCY_LEVELS
+    ]
 
 
 def nees_band(episodes: int, dof: int = 3, probability: float = 0.95) -> tuple[float, float]:

@@ -59,11 +59,11 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaig
   ``outlier_share`` of views erring ``outlier_scale`` times the σ
   (:mod:`bve_mj.estimation.outliers`), fitted to the neighbours' rows of ``bve-mj calibrate
   --every-fruit``.
-- the errors are **heavy-tailed**: beyond 3σ several times as often as a Gaussian's. The
-  claimed covariance is scaled by κ² (``tail_scale``, fitted: :mod:`bve_mj.estimation.
-  noise_tail`) so that its 99.9% ellipsoid, the one the scenario suite judges silent
-  failures by, holds 99.9% of the errors of episode-like estimates (3-6 calibration views of
-  a fruit fused and claimed as the loop does); the filter itself fuses with the variances.
+- the errors are **heavy-tailed**: the claim is a Student-t (:mod:`bve_mj.estimation.
+  claim_shape`) whose covariance is m (``moment_scale``) and whose 99.9% bound is κ²
+  (``tail_scale``) times the claim before them, both fitted on episode-like estimates (3-6
+  calibration views of a fruit fused and claimed as the loop does: :mod:`~bve_mj.estimation.
+  noise_tail`); the filter itself fuses with the variances.
 
 The fitted model is a JSON file; the package ships one (``default``) and settings name it
 (``measurement.noise_model``). It holds the camera it was made with: a model for another
@@ -83,6 +83,7 @@ import numpy as np
 
 from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
+from bve_mj.estimation.claim_shape import ClaimShape
 from bve_mj.estimation.outliers import OutlierMixture
 from bve_mj.estimation.view_correlation import ViewCorrelation
 
@@ -153,14 +154,12 @@ class NoiseModel:
             directions (independent in a file that does not say).
         refusal_scale: b ≥ 0, a fruit's error variance against the share of its views the
             detector refused: × exp(b · share) (0 in a file that does not say).
-        tail_scale: κ² ≥ 1, how much a claimed covariance grows for its 99.9% ellipsoid to
-            hold 99.9% of the errors of episode-like estimates from the calibration views:
-            they are heavy-tailed, and a Gaussian with their variance holds the bulk, not the
-            tail (1 in a file that does not say).
-        view_tail_scale: κ² ≥ 1 of single views (the calibration views' errors, their own
-            offset bounded over all fruits): what size-only (range) episodes claim with, whose
-            tails the episode-like draws of ``tail_scale`` do not measure (1 in a file that
-            does not say).
+        tail_scale, moment_scale: κ² ≥ 1 and m ≤ κ²: the claim (a Student-t, :attr:`claim_shape`)
+            before them times κ² is its bound, whose 99.9% ellipsoid holds 99.9% of the errors
+            of episode-like estimates from the calibration views, and times m its covariance,
+            their second moment (κ² 1 and m None, Gaussian, in a file that does not say).
+        view_tail_scale, view_moment_scale: the same of single views (their own offset bounded
+            over all fruits): what size-only (range) episodes claim with.
         centre_offset_terms: coefficients (3,) of the fruit's own offset's variance [share of
             the radius²] on :data:`OFFSET_FEATURES`, or () (a file that does not say): the
             offset is then ``centre_bias_rel`` whatever was seen.
@@ -184,6 +183,8 @@ class NoiseModel:
     refusal_scale: float = 0.0
     tail_scale: float = 1.0
     view_tail_scale: float = 1.0
+    moment_scale: float | None = None
+    view_moment_scale: float | None = None
     centre_offset_terms: tuple[float, ...] = ()
     outlier_share: float = 0.0
     outlier_scale: float = 1.0
@@ -207,13 +208,20 @@ class NoiseModel:
         for name in ("tail_scale", "view_tail_scale"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 1.0):
                 raise ValueError(f"{name} must be a finite number >= 1")
-        terms = self.centre_offset_terms
-        if terms and (
-            len(terms) != len(OFFSET_FEATURES) or not all(math.isfinite(x) and x >= 0.0 for x in terms)
-        ):
-            raise ValueError(
-                f"centre_offset_terms must be {len(OFFSET_FEATURES)} finite numbers >= 0, or none"
-            )
+        _ = (self.claim_shape, self.view_claim_shape)  # raise ValueError naming a moment scale
+        n, terms = len(OFFSET_FEATURES), self.centre_offset_terms
+        if terms and (len(terms) != n or not all(math.isfinite(x) and x >= 0.0 for x in terms)):
+            raise ValueError(f"centre_offset_terms must be {n} finite numbers >= 0, or none")
+
+    @property
+    def claim_shape(self) -> ClaimShape:
+        """The shape of an episode's claim (camera measurement): ρ = κ²/m, Gaussian without m."""
+        return ClaimShape.of_scales(self.tail_scale, self.moment_scale, "moment_scale")
+
+    @property
+    def view_claim_shape(self) -> ClaimShape:
+        """The same with the single views' tail (size-only episodes claim with it)."""
+        return ClaimShape.of_scales(self.view_tail_scale, self.view_moment_scale, "view_moment_scale")
 
     @property
     def outliers(self) -> OutlierMixture:
@@ -353,6 +361,10 @@ def load_noise_model(name: str = "default") -> NoiseModel:
                 "refusal_scale": float(values.get("refusal_scale", 0.0)),
                 "tail_scale": float(values.get("tail_scale", 1.0)),
                 "view_tail_scale": float(values.get("view_tail_scale", values.get("tail_scale", 1.0))),
+                **{
+                    k: None if values.get(k) is None else float(values[k])
+                    for k in ("moment_scale", "view_moment_scale")
+                },
                 "centre_offset_terms": tuple(float(x) for x in values.get("centre_offset_terms", ())),
                 "outlier_share": float(values.get("outlier_share", 0.0)),
                 "outlier_scale": float(values.get("outlier_scale", 1.0)),

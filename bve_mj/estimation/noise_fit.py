@@ -15,7 +15,7 @@ import numpy as np
 from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.noise import OFFSET_FEATURES, NoiseModel, Outline
-from bve_mj.estimation.noise_tail import FruitKey, fruit_key, tail_scale, view_tail_scale
+from bve_mj.estimation.noise_tail import FruitKey, episode_tails, fruit_key, view_tails
 from bve_mj.estimation.outliers import OutlierMixture, fit_outlier_mixture
 from bve_mj.estimation.view_correlation import ViewCorrelation, fit_view_correlation
 
@@ -66,10 +66,16 @@ def fit_noise_model(
     refusal, fruits = _refusal_scale([*refused, *kept], model)
     model = replace(model, refusal_scale=refusal)
     sigmas = partial(_row_sigmas, model)
+    (kappa2, moment), (view_kappa2, view_moment) = (
+        episode_tails(kept, refused, model, f, sigmas),
+        view_tails(kept, refused, model, f, sigmas),
+    )
     model = replace(
         model,
-        tail_scale=tail_scale(kept, refused, model, f, sigmas),
-        view_tail_scale=view_tail_scale(kept, refused, model, f, sigmas),
+        tail_scale=kappa2,
+        moment_scale=moment,
+        view_tail_scale=view_kappa2,
+        view_moment_scale=view_moment,
     )
     mixture = _outlier_mixture([r for r in (outlier_rows or rows) if r.get("detected")], model, f)
     model = replace(model, outlier_share=mixture.share, outlier_scale=mixture.scale)

@@ -18,9 +18,11 @@ __all__ = [
     "TAIL_DRAWS",
     "TAIL_PROBABILITY",
     "FruitKey",
+    "episode_tails",
     "fruit_key",
     "tail_scale",
     "view_tail_scale",
+    "view_tails",
 ]
 
 FruitKey = tuple[Any, Any, Any]
@@ -55,7 +57,20 @@ def tail_scale(
     focal_px: float,
     sigmas_px: Callable[[dict[str, Any]], tuple[float, float]],
 ) -> float:
-    """κ² ≥ 1: how much the covariance an episode claims must grow for its χ²₃ ellipsoid at
+    """κ² of :func:`episode_tails`."""
+    return episode_tails(kept, refused, model, focal_px, sigmas_px)[0]
+
+
+def episode_tails(
+    kept: Sequence[dict[str, Any]],
+    refused: Sequence[dict[str, Any]],
+    model: NoiseModel,
+    focal_px: float,
+    sigmas_px: Callable[[dict[str, Any]], tuple[float, float]],
+) -> tuple[float, float | None]:
+    """(κ², m): the claim's tail scale and moment scale from episode-like estimates.
+
+    κ² ≥ 1: how much the covariance an episode claims must grow for its χ²₃ ellipsoid at
     :data:`TAIL_PROBABILITY` to hold that share of the errors of episode-like estimates.
 
     An episode's estimate is not one view: it fuses a few, and claims the filter's covariance
@@ -73,7 +88,12 @@ def tail_scale(
     with fewer than 20 fruits of 4 views.
 
     ``sigmas_px(row)``: the per-view σ of the centre's image coordinates and of the apparent
-    radius the model gives that row [px]."""
+    radius the model gives that row [px].
+
+    m ≤ κ²: the mean of the same draws' NEES over 3 (each fruit weighted alike): the share of
+    the claim before κ² that is the errors' second moment (None with too few fruits, as κ² is
+    then 1). The claim's covariance is m times it, its bound κ² times it
+    (:class:`~bve_mj.estimation.claim_shape.ClaimShape`, ρ = κ²/m)."""
     from bve_mj.estimation.metrics import chi2_quantile
     from bve_mj.estimation.models import BearingSizeModel
     from bve_mj.estimation.view_correlation import new_view_share
@@ -85,7 +105,7 @@ def tail_scale(
     shares = _refusals([*kept, *refused])
     fruits = {key: rows for key, rows in views_of.items() if len(rows) >= 4}
     if len(fruits) < 20:
-        return 1.0
+        return 1.0, None
     rng = np.random.default_rng(0)
     nees: list[list[float]] = []  # per fruit, its draws
     for key, rows in fruits.items():
@@ -143,7 +163,8 @@ def tail_scale(
         for _ in range(TAIL_BOOTSTRAP)
     ]
     ratio = float(np.quantile(q, TAIL_BOUND)) / float(chi2_quantile(TAIL_PROBABILITY, 3))
-    return max(1.0, ratio)
+    kappa2 = max(1.0, ratio)
+    return kappa2, min(float(np.mean(per_fruit)) / 3.0, kappa2)
 
 
 def view_tail_scale(
@@ -153,7 +174,18 @@ def view_tail_scale(
     focal_px: float,
     sigmas_px: Callable[[dict[str, Any]], tuple[float, float]],
 ) -> float:
-    """κ² ≥ 1 of single views: how much the covariance a view claims (its noise, the fruit's
+    """κ² of :func:`view_tails`."""
+    return view_tails(kept, refused, model, focal_px, sigmas_px)[0]
+
+
+def view_tails(
+    kept: Sequence[dict[str, Any]],
+    refused: Sequence[dict[str, Any]],
+    model: NoiseModel,
+    focal_px: float,
+    sigmas_px: Callable[[dict[str, Any]], tuple[float, float]],
+) -> tuple[float, float | None]:
+    """(κ², m) of single views. κ² ≥ 1: how much the covariance a view claims (its noise, the fruit's
     own offset bounded over all fruits, the refusal scale of its fruit) must grow for its χ²₃
     ellipsoid at :data:`TAIL_PROBABILITY` to hold that share of the calibration views'
     errors: the empirical quantile of their squared normalised errors over χ²₃'s.
@@ -161,7 +193,8 @@ def view_tail_scale(
     What size-only (range) episodes claim with: :func:`tail_scale` draws episodes of the
     camera measurement, and an episode that measures the apparent size alone (10-16 views,
     its centre trilaterated from sizes) is not one of them; until such episodes are drawn,
-    they keep this wider bound (``NoiseModel.view_tail_scale``)."""
+    they keep this wider bound (``NoiseModel.view_tail_scale``). m ≤ κ²: the mean of the
+    views' squared normalised errors over 3, their second moment (None with too few views)."""
     from bve_mj.estimation.metrics import chi2_quantile
 
     refused_of = _refusals([*kept, *refused])
@@ -179,9 +212,10 @@ def view_tail_scale(
         ea = r["err_alpha_px"] - model.radius_bias(r["radius_px"])
         z2.append((float(e @ np.linalg.solve(lateral, e)) + (ea / sr) ** 2) / scale)
     if len(z2) < 100:
-        return 1.0
+        return 1.0, None
     ratio = float(np.quantile(z2, TAIL_PROBABILITY)) / float(chi2_quantile(TAIL_PROBABILITY, 3))
-    return max(1.0, ratio)
+    kappa2 = max(1.0, ratio)
+    return kappa2, min(float(np.mean(z2)) / 3.0, kappa2)
 
 
 def _refusals(rows: Sequence[dict[str, Any]]) -> dict[FruitKey, list[bool]]:

@@ -10,9 +10,10 @@ from functools import partial
 import numpy as np
 
 from bve_mj.estimation import Belief
+from bve_mj.estimation.claim_shape import GAUSSIAN, ClaimShape
 from bve_mj.estimation.noise import NoiseModel, Outline
 
-__all__ = ["Claims"]
+__all__ = ["Claims", "shape_of"]
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,11 @@ class Claims:
         tail_scale: κ² ≥ 1, the claimed covariance's last factor: the detector's errors are
             heavy-tailed, and κ² makes the claim's 99.9% ellipsoid hold 99.9% of the errors
             of episode-like estimates from the calibration views (``NoiseModel.tail_scale``).
+        shape: the claim's shape (:class:`~bve_mj.estimation.claim_shape.ClaimShape`): what
+            :meth:`claim` returns is its **bound**, the Gaussian whose 99.9% ellipsoid is the
+            claim's 99.9% region and the one the loop decides with; the claim itself is a
+            Student-t of that mean whose covariance is the bound's over ``shape.bound_scale``
+            (the errors' second moment: ``NoiseModel.moment_scale``). Gaussian by default.
         offset_of: when set, the centre's offset covariance from what the detector saw of
             the fruit in the views fused (one :class:`~bve_mj.estimation.noise.Outline` each,
             None where not known: :meth:`bve_mj.estimation.noise.NoiseModel.centre_offset_cov`,
@@ -54,6 +60,7 @@ class Claims:
     refusal_scale: float = 0.0
     tail_scale: float = 1.0
     offset_of: Callable[[Sequence[Outline | None]], np.ndarray] | None = None
+    shape: ClaimShape = GAUSSIAN
 
     @classmethod
     def of_detector(
@@ -75,7 +82,7 @@ class Claims:
         if size_only:
             return cls(
                 noise.centre_bias_cov(fruit_radius_m), innovation_prior_dof, noise.refusal_scale,
-                noise.view_tail_scale,
+                noise.view_tail_scale, shape=noise.view_claim_shape,
             )  # fmt: skip
         return cls(
             noise.centre_bias_cov(fruit_radius_m),
@@ -83,6 +90,7 @@ class Claims:
             noise.refusal_scale,
             noise.tail_scale,
             partial(noise.centre_offset_cov, fruit_radius_m, shape_index),
+            noise.claim_shape,
         )
 
     def scale(self, innovations: Sequence[tuple[float, float]]) -> float:
@@ -101,9 +109,9 @@ class Claims:
         refused_share: float = 0.0,
         outlines: Sequence[Outline | None] | None = None,
     ) -> Belief:
-        """The belief the episode claims, from the filter's, its accepted innovations, the
-        share of its views in which the detector refused the fruit and, when given, what the
-        detector saw of it in the views fused (``outlines``)."""
+        """The bound of the belief the episode claims (see ``shape``), from the filter's, its
+        accepted innovations, the share of its views in which the detector refused the fruit
+        and, when given, what the detector saw of it in the views fused (``outlines``)."""
         cov = np.array(belief.cov) * self.scale(innovations)
         if self.offset_of is not None and outlines is not None:
             cov[:3, :3] += self.offset_of(outlines)
@@ -112,3 +120,8 @@ class Claims:
         if self.refusal_scale > 0.0:
             cov *= math.exp(self.refusal_scale * min(max(refused_share, 0.0), 1.0))
         return Belief(belief.mean, cov * self.tail_scale)
+
+
+def shape_of(claims: Claims | None) -> ClaimShape:
+    """The shape of what a loop with these claims claims (Gaussian without claims)."""
+    return GAUSSIAN if claims is None else claims.shape

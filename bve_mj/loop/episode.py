@@ -16,7 +16,7 @@ from bve_mj.estimation import Belief, UpdateResult, filter_update, predict
 from bve_mj.estimation.prior_bound import PriorBound
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share, shared_dof
 from bve_mj.geometry import unit
-from bve_mj.loop.claims import Claims
+from bve_mj.loop.claims import Claims, shape_of
 from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.loop.records import EpisodeResult, ViewRecord
@@ -199,7 +199,8 @@ class EpisodeLoop:
             outcome = Outcome.AMBIGUOUS
         if outcome.localised and another_fruit_fits_the_prior(self.prior, belief, views, odds):
             outcome = Outcome.AMBIGUOUS
-        return EpisodeResult(self.prior, tuple(views), time.perf_counter() - self._t0, outcome)
+        wall = time.perf_counter() - self._t0
+        return EpisodeResult(self.prior, tuple(views), wall, outcome, shape_of(self.claims))
 
     def leave_one_out(self) -> list[Belief]:
         """What the episode would claim now with each measurement fused since the last belief

@@ -34,7 +34,7 @@ from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.tracks import Track, Tracker
 from bve_mj.estimation.unmeasured import explained_in_view, settled, too_small, unexplained
-from bve_mj.loop.claims import Claims
+from bve_mj.loop.claims import Claims, shape_of
 from bve_mj.loop.events import Event
 from bve_mj.loop.fruit_records import FruitsResult, FruitState, FruitsView
 from bve_mj.loop.outcomes import Outcome
@@ -301,7 +301,7 @@ def run_every_fruit(
         outcome = Outcome.MAX_VIEWS if seen else Outcome.NEVER_DETECTED
     elif outcome == Outcome.CONVERGED and (tracker.dropped or views[-1].unmeasured):
         outcome = Outcome.INCOMPLETE
-    return FruitsResult(tuple(views), time.perf_counter() - t0, outcome)
+    return FruitsResult(tuple(views), time.perf_counter() - t0, outcome, shape_of(claims))
 
 
 def _unhiding(planner: PlansForEveryFruit, target: int) -> list[Event]:

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.claim_shape import GAUSSIAN, ClaimShape
 from bve_mj.estimation.tracks import ViewTracking
 from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
@@ -83,11 +84,14 @@ class FruitsView:
 
 @dataclass(frozen=True)
 class FruitsResult:
-    """A finished every-fruit episode."""
+    """A finished every-fruit episode. ``shape``: the shape of what its tracks claim (each
+    :class:`FruitState`'s belief is the claim's bound: :class:`~bve_mj.loop.records.
+    EpisodeResult` says how)."""
 
     views: tuple[FruitsView, ...]
     wall_s: float
     outcome: Outcome
+    shape: ClaimShape = GAUSSIAN
 
     @property
     def final(self) -> tuple[FruitState, ...]:
@@ -101,10 +105,17 @@ class FruitsResult:
 
 @dataclass(frozen=True)
 class FruitMatch:
-    """A true ripe fruit and the confirmed track matched to it (None when none was)."""
+    """A true ripe fruit and the confirmed track matched to it (None when none was); ``shape``
+    the shape of the track's claim (its belief is the bound: :attr:`claim` is the claim)."""
 
     fruit: Fruit
     track: FruitState | None
+    shape: ClaimShape = GAUSSIAN
+
+    @property
+    def claim(self) -> Belief | None:
+        """What the track claims: its bound's mean, the covariance of the claim's shape."""
+        return None if self.track is None else self.shape.claim(self.track.belief)
 
     @property
     def error_mm(self) -> float:
@@ -114,7 +125,9 @@ class FruitMatch:
 
     @property
     def nees(self) -> float:
-        return math.nan if self.track is None else self.track.belief.mahalanobis_sq(self.fruit.centre_m)
+        """The NEES of the claim (its covariance, not its bound's)."""
+        claim = self.claim
+        return math.nan if claim is None else claim.mahalanobis_sq(self.fruit.centre_m)
 
     @property
     def filter_nees(self) -> float:

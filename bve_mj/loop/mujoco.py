@@ -151,6 +151,7 @@ class MujocoEpisode:
         """The ``--json`` document: settings, seed, views, final error, outcome, wall time."""
         views = []
         for v in self.result.views:
+            claim = self.result.claim(v)
             views.append(
                 {
                     "view": v.iteration,
@@ -160,17 +161,17 @@ class MujocoEpisode:
                     "measured": v.measured,
                     "accepted": v.accepted,
                     "nis": None if math.isnan(v.nis) else v.nis,
-                    "estimate_m": v.belief.centre_m.tolist(),
-                    "covariance_m2": v.belief.cov[:3, :3].tolist(),
-                    "error_mm": 1e3 * float(np.linalg.norm(v.belief.centre_m - self.truth)),
+                    "estimate_m": claim.centre_m.tolist(),
+                    "covariance_m2": claim.cov[:3, :3].tolist(),
+                    "error_mm": 1e3 * float(np.linalg.norm(claim.centre_m - self.truth)),
                     "truth_m": self.truth.tolist(),
-                    **self._radius_json(v.belief),
+                    **self._radius_json(claim),
                     **(v.world or {}),
                     # the loop's events (the world's among them) over the world's own list
                     "events": [str(e) for e in v.events],
                 }
             )
-        final = self.result.final
+        final = self.result.final_claim
         return {
             "settings": settings_to_dict(self.settings),
             "seed": self.seed,
@@ -184,6 +185,7 @@ class MujocoEpisode:
             "views": views,
             "final_error_mm": self.final_error_mm,
             "final_nees": final.mahalanobis_sq(self.truth),
+            "claim_shape": self.result.shape.to_json(),
             "final_filter_nees": self.result.final_filter.mahalanobis_sq(self.truth),
             **self._final_radius_json(final),
             "state": self._state_json(final),

@@ -110,7 +110,7 @@ class FruitsEpisode:
         fruits = list(self.info.fruits)
         ripe = {f.name for f in self.ripe}
         if not tracks:
-            return [FruitMatch(f, None) for f in self.ripe], [], []
+            return [FruitMatch(f, None, self.result.shape) for f in self.ripe], [], []
         d = np.array([[np.linalg.norm(t.belief.centre_m - f.centre_m) for f in fruits] for t in tracks])
         limit = np.array([f.radius_m for f in fruits])[None, :]
         rows, cols = linear_sum_assignment(np.where(d <= limit, d, 1e3))
@@ -124,7 +124,7 @@ class FruitsEpisode:
             tracks[i] for i, j in zip(rows, cols, strict=True) if i in matched and fruits[j].name not in ripe
         ]
         false = [t for i, t in enumerate(tracks) if i not in matched]
-        return [FruitMatch(f, by_fruit.get(f.name)) for f in self.ripe], other, false
+        return [FruitMatch(f, by_fruit.get(f.name), self.result.shape) for f in self.ripe], other, false
 
     def views_to_localise(self, within_mm: float) -> int | None:
         """How many views it took until every true ripe fruit of the zone had a localised
@@ -185,7 +185,7 @@ class FruitsEpisode:
                     "track": None if t is None else t.id,
                     "estimate_m": None if t is None else t.belief.centre_m.tolist(),
                     "radius_estimate_mm": None if t is None else 1e3 * float(t.belief.mean[3]),
-                    "radius_sigma_mm": None if t is None else 1e3 * float(math.sqrt(t.belief.cov[3, 3])),
+                    "radius_sigma_mm": None if m.claim is None else 1e3 * float(math.sqrt(m.claim.cov[3, 3])),
                     "error_mm": None if t is None else m.error_mm,
                     "nees": None if t is None else m.nees,
                     "localised": bool(t is not None and t.localised),
@@ -202,6 +202,7 @@ class FruitsEpisode:
             "seen_in_part": [t.to_json() for t in self.result.unmeasured],
             "zone_framed": views[-1]["zone_framed"] if views else None,
             "harvest": None if self.harvest is None else self.harvest.to_json(),
+            "claim_shape": self.result.shape.to_json(),
             "outcome": self.result.outcome,
             "wall_s": self.result.wall_s,
         }

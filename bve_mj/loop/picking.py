@@ -128,4 +128,5 @@ def survey_and_pick(
             for v in result.views
         ]
         wall += result.wall_s
-    return FruitsResult(tuple(views), wall, result.outcome), HarvestResult(tuple(order), tuple(visits))
+    joined = FruitsResult(tuple(views), wall, result.outcome, result.shape)
+    return joined, HarvestResult(tuple(order), tuple(visits))

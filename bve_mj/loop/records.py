@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bve_mj.estimation import Belief
+from bve_mj.estimation.claim_shape import GAUSSIAN, ClaimShape
 from bve_mj.loop.events import Event, EventKind
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.planning.plan import PlanStatus
@@ -26,7 +27,9 @@ class ViewRecord:
     ``dropped``, ``false_detection``, ``outlier``, ``ik_failure``). ``belief`` is what the
     episode claims; ``filter_belief`` the filter's own, where the claim differs from it
     (:class:`~bve_mj.loop.claims.Claims`: the fruit's own offset, the innovation, refusal and
-    tail scales), else None.
+    tail scales), else None. Where the claim has a heavy-tailed shape (:class:`~bve_mj.
+    estimation.claim_shape.ClaimShape`, :attr:`EpisodeResult.shape`) ``belief`` is its
+    bound, the Gaussian the loop decides with; :meth:`EpisodeResult.claim` is the claim.
     """
 
     iteration: int
@@ -49,16 +52,31 @@ class ViewRecord:
 
 @dataclass(frozen=True)
 class EpisodeResult:
-    """A finished episode: the prior, every view, the final belief, and the wall time [s]."""
+    """A finished episode: the prior, every view, the final belief, and the wall time [s].
+
+    ``shape``: the shape of what its views claim (Gaussian unless the episode's claims say
+    otherwise): each view's ``belief`` is the claim's bound, and :meth:`claim` the claim
+    itself, the bound's covariance over ``shape.bound_scale`` (the errors' second moment)."""
 
     prior: Belief
     views: tuple[ViewRecord, ...]
     wall_s: float
     outcome: Outcome = Outcome.MAX_VIEWS
+    shape: ClaimShape = GAUSSIAN
 
     @property
     def final(self) -> Belief:
+        """The final claim's bound (the belief the loop decided with)."""
         return self.views[-1].belief if self.views else self.prior
+
+    @property
+    def final_claim(self) -> Belief:
+        """The final claim: its mean and covariance (:attr:`final` where it is Gaussian)."""
+        return self.claim(self.views[-1]) if self.views else self.prior
+
+    def claim(self, view: ViewRecord) -> Belief:
+        """What ``view`` claims: its bound's mean, with the covariance of the claim's shape."""
+        return self.shape.claim(view.belief)
 
     @property
     def final_filter(self) -> Belief:

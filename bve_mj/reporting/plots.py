@@ -276,7 +276,7 @@ def plot_consistency(curves: dict[str, list[tuple[float, float]]], path: str | P
             )
     ax.set_xlim(0.48, 1.005)
     ax.set_ylim(0.0, 1.02)
-    ax.set_xlabel("p (the ellipsoid holding the truth with probability p, if honest)")
+    ax.set_xlabel("p (the claim's region holding the truth with probability p, if honest)")
     ax.set_ylabel("share of episodes with the truth inside it")
     ax.set_title(wrap_title(title or "consistency of the final covariance", 6.0, 11), fontsize=11)
     ax.grid(alpha=0.3)
