@@ -195,7 +195,14 @@ def test_bad_fruits_input_exits_2_with_one_line(args, field):
 
 
 def _row(run, views_to_truss, outcome="converged"):
-    fruit = {"error_mm": 1.0, "nees": 2.0, "localised": True, "within": True, "radius_error_mm": 0.1}
+    fruit = {
+        "error_mm": 1.0,
+        "nees": 2.0,
+        "localised": True,
+        "outside_claim": False,
+        "within": True,
+        "radius_error_mm": 0.1,
+    }
     return {
         "run": run, "outcome": outcome, "views": 10, "views_to_truss": views_to_truss, "fruits": [fruit],
         "false_tracks": 0, "plan_ms": [1.0], "track_ms": [1.0], "tracks_max": 1, "wall_s": 1.0,
