@@ -185,7 +185,7 @@ def test_the_tail_draws_count_views_from_one_place_as_the_share_they_add(rng):
     needs less (κ² 6.3-7.9 against 8.3-10.9 over five seeds: 0.67-0.78 of it)."""
     from dataclasses import replace
 
-    from bve_mj.estimation.noise_tail import tail_scale
+    from bve_mj.estimation.noise_tail import episode_tails
     from bve_mj.estimation.view_correlation import ViewCorrelation
 
     rows = []
@@ -205,7 +205,10 @@ def test_the_tail_draws_count_views_from_one_place_as_the_share_they_add(rng):
     far = replace(model, centre_correlation=apart(model.centre_correlation),
                   radius_correlation=apart(model.radius_correlation))  # fmt: skip
     f = CameraConfig().focal_px
-    near_scale, far_scale = tail_scale(rows, [], model, f, sigmas), tail_scale(rows, [], far, f, sigmas)
+    near_scale, far_scale = (
+        episode_tails(rows, [], model, f, sigmas)[0],
+        episode_tails(rows, [], far, f, sigmas)[0],
+    )
     assert far_scale > 1.0
     assert near_scale < 0.85 * far_scale
 

@@ -20,8 +20,6 @@ __all__ = [
     "FruitKey",
     "episode_tails",
     "fruit_key",
-    "tail_scale",
-    "view_tail_scale",
     "view_tails",
 ]
 
@@ -42,23 +40,12 @@ probability must hold (the scenario suite's silent failures are judged at it).""
 
 TAIL_DRAWS = 200
 
-"""Episode-like draws of views per calibration fruit (:func:`tail_scale`)."""
+"""Episode-like draws of views per calibration fruit (:func:`episode_tails`)."""
 
 TAIL_BOOTSTRAP, TAIL_BOUND = 200, 0.9
 
 """Resamples of the calibration fruits, and the bound taken over them: κ² is the 90% upper
 bound of the 99.9% quantile, which rests on the few fruits that err most."""
-
-
-def tail_scale(
-    kept: Sequence[dict[str, Any]],
-    refused: Sequence[dict[str, Any]],
-    model: NoiseModel,
-    focal_px: float,
-    sigmas_px: Callable[[dict[str, Any]], tuple[float, float]],
-) -> float:
-    """κ² of :func:`episode_tails`."""
-    return episode_tails(kept, refused, model, focal_px, sigmas_px)[0]
 
 
 def episode_tails(
@@ -167,17 +154,6 @@ def episode_tails(
     return kappa2, min(float(np.mean(per_fruit)) / 3.0, kappa2)
 
 
-def view_tail_scale(
-    kept: Sequence[dict[str, Any]],
-    refused: Sequence[dict[str, Any]],
-    model: NoiseModel,
-    focal_px: float,
-    sigmas_px: Callable[[dict[str, Any]], tuple[float, float]],
-) -> float:
-    """κ² of :func:`view_tails`."""
-    return view_tails(kept, refused, model, focal_px, sigmas_px)[0]
-
-
 def view_tails(
     kept: Sequence[dict[str, Any]],
     refused: Sequence[dict[str, Any]],
@@ -190,7 +166,7 @@ def view_tails(
     ellipsoid at :data:`TAIL_PROBABILITY` to hold that share of the calibration views'
     errors: the empirical quantile of their squared normalised errors over χ²₃'s.
 
-    What size-only (range) episodes claim with: :func:`tail_scale` draws episodes of the
+    What size-only (range) episodes claim with: :func:`episode_tails` draws episodes of the
     camera measurement, and an episode that measures the apparent size alone (10-16 views,
     its centre trilaterated from sizes) is not one of them; until such episodes are drawn,
     they keep this wider bound (``NoiseModel.view_tail_scale``). m ≤ κ²: the mean of the
