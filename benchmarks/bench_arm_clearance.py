@@ -20,6 +20,7 @@ from bve_mj.cli.script import SEED, ScriptParser, guarded, integer
 from bve_mj.config import with_overrides
 from bve_mj.errors import BveError
 from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.claim_shape import GAUSSIAN, ClaimShape
 from bve_mj.loop.arm_clearance import FruitClearance
 from bve_mj.loop.mujoco import run_mujoco_episode
 from bve_mj.loop.records import ViewRecord
@@ -31,7 +32,7 @@ class Clearance:
 
     clearance: FruitClearance | None = None
 
-    def attach(self, world: MujocoWorld, prior: Belief) -> None:
+    def attach(self, world: MujocoWorld, prior: Belief, shape: ClaimShape = GAUSSIAN) -> None:
         self.clearance = FruitClearance(world, world.info)
 
     def on_step(self, sim_time: float) -> None:

@@ -177,6 +177,33 @@ def test_the_claims_tail_scale_holds_the_errors_tail(rng, heavy):
     assert 0.0 < model.view_moment_scale <= model.view_tail_scale
 
 
+def test_the_radius_second_moment_is_its_own(rng):
+    """m_r is the radius' squared error over its claimed variance in the episode-like draws:
+    where the σ the model gives the apparent radius is twice its errors' it falls nearly
+    threefold (0.35-0.38 of it over five seeds: not fourfold, as the smaller radius residuals
+    also lower the innovation scale) while the centre's m moves by 4-8%. With the σ the rows
+    were drawn with it is 1.05-1.68, above 1: the claim's innovation scale, from 3-6 views and
+    its prior's 6 dof, is below 1 on average (0.80 here; 0.83-0.97 in the loop's own episodes)."""
+    from dataclasses import replace
+
+    from bve_mj.estimation.noise_tail import episode_tails
+
+    rows = _synthetic_rows(rng, fruits=60, views=8)
+    model = replace(load_noise_model("default"), radius_bias_px=(-0.2, -0.5))  # the rows' bias
+
+    def drawn(r, radius_factor=1.0):
+        partial = (1 - r["arc_deg"] / 360) * r["radius_px"] / 10
+        centre = math.sqrt(0.3 * r["centre_fit_px"] ** 2 + 0.02 * partial**2)
+        return centre, radius_factor * math.sqrt(0.25 * r["radius_fit_px"] ** 2)
+
+    f = CameraConfig().focal_px
+    honest = episode_tails(rows, [], model, f, drawn)
+    wide = episode_tails(rows, [], model, f, lambda r: drawn(r, 2.0))
+    assert 0.8 < honest.radius_moment_scale < 2.2
+    assert 0.25 < wide.radius_moment_scale / honest.radius_moment_scale < 0.5
+    assert wide.moment_scale == pytest.approx(honest.moment_scale, rel=0.25)
+
+
 def test_the_tail_draws_count_views_from_one_place_as_the_share_they_add(rng):
     """Fruits whose views come in twins (two views 1 mm apart, one error: a view from one
     place repeats its error): an episode-like draw that counts the twin as a fresh view
@@ -565,9 +592,14 @@ def test_the_claims_moment_scale_is_validated_and_read_back(tmp_path):
     with pytest.raises(ValueError, match="view_moment_scale"):
         replace(model, view_moment_scale=0.0)
     assert replace(model, moment_scale=None).claim_shape.bound_scale == 1.0
+    with pytest.raises(ValueError, match="radius_moment_scale"):
+        replace(model, radius_moment_scale=-1.0)
+    with pytest.raises(ValueError, match="radius_moment_scale"):
+        replace(model, radius_moment_scale=math.nan)
     path = tmp_path / "model.json"
     path.write_text(json.dumps(model.to_json()), encoding="utf-8")
     assert load_noise_model(str(path)).claim_shape == model.claim_shape
-    old = {k: v for k, v in model.to_json().items() if k not in ("moment_scale", "view_moment_scale")}
+    moments = ("moment_scale", "view_moment_scale", "radius_moment_scale")
+    old = {k: v for k, v in model.to_json().items() if k not in moments}
     path.write_text(json.dumps(old), encoding="utf-8")
     assert load_noise_model(str(path)).claim_shape.bound_scale == 1.0

@@ -25,7 +25,7 @@ def test_a_gaussian_shape_is_the_chi2_ellipsoid_and_leaves_the_belief_alone():
     for p in (0.5, 0.971, 0.999):
         assert GAUSSIAN.region(p) == pytest.approx(float(chi2_quantile(p, 3)))
     assert GAUSSIAN.claim(belief) is belief
-    assert GAUSSIAN.to_json() == {"bound_scale": 1.0, "dof": None}
+    assert GAUSSIAN.to_json() == {"bound_scale": 1.0, "dof": None, "radius_bound_scale": None}
 
 
 @pytest.mark.parametrize("rho", [1.5, 3.38, 5.55])
@@ -41,6 +41,39 @@ def test_the_claims_region_at_the_decision_probability_is_its_bounds_ellipsoid(r
     np.testing.assert_array_equal(claim.mean, bound.mean)
     x = bound.mean + np.array([0.003, -0.001, 0.004])
     assert claim.mahalanobis_sq(x) == pytest.approx(rho * bound.mahalanobis_sq(x))
+
+
+def test_the_radius_has_its_own_scale_and_keeps_its_correlation_with_the_centre():
+    """ρ_r scales the radius' variance alone (D·P·D): the centre's block is the bound's over ρ,
+    the radius' over ρ_r, their correlation the bound's; a 3-D belief (no radius) and the
+    region the loop decides with do not change."""
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(7, 7))
+    bound = Belief(np.r_[0.4, 0.0, 0.2, 0.03, 0.0, 0.0, 0.0], a @ a.T * 1e-6 + np.eye(7) * 1e-8)
+    shape, same = ClaimShape(3.38, 1.6), ClaimShape(3.38)
+    claim = shape.claim(bound)
+    np.testing.assert_allclose(claim.cov[:3, :3], bound.cov[:3, :3] / 3.38)
+    np.testing.assert_allclose(claim.cov[3, 3], bound.cov[3, 3] / 1.6)
+    np.testing.assert_allclose(claim.cov[4:, 4:], bound.cov[4:, 4:] / 3.38)
+
+    def corr(c):
+        return c / np.sqrt(np.outer(np.diag(c), np.diag(c)))
+
+    np.testing.assert_allclose(corr(claim.cov), corr(bound.cov), atol=1e-12)
+    np.testing.assert_allclose(same.claim(bound).cov, bound.cov / 3.38)
+    centre = Belief(bound.mean[:3], bound.cov[:3, :3])
+    np.testing.assert_allclose(shape.claim(centre).cov, same.claim(centre).cov)
+    assert shape.dof == same.dof and shape.region(0.999) == same.region(0.999)
+    assert ClaimShape(3.38, 0.5).claim(bound).cov[3, 3] == pytest.approx(2.0 * bound.cov[3, 3])  # wider
+    assert shape.to_json()["radius_bound_scale"] == 1.6
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, math.inf, math.nan, True, "2"])
+def test_a_radius_scale_not_a_positive_number_is_refused(bad):
+    with pytest.raises(ValueError, match="radius_bound_scale"):
+        ClaimShape(2.0, bad)
+    with pytest.raises(ValueError, match="radius_moment_scale"):
+        ClaimShape.of_scales(1.5, 0.5, "moment_scale", bad if bad != 0.0 else -0.0)
 
 
 def test_a_heavier_tail_has_fewer_degrees_of_freedom_and_a_narrower_bulk():

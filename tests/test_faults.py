@@ -255,7 +255,7 @@ def test_a_second_red_blob_in_the_rendered_scene_does_not_capture_the_estimate(k
     from bve_mj.perception.masks import red_mask
 
     class CountRedBlobs:  # a recorder that checks the second red blob is really in view
-        def attach(self, world, prior):  # type: ignore[no-untyped-def]
+        def attach(self, world, prior, shape=None):  # type: ignore[no-untyped-def]
             self.world, self.counts = world, []
 
         def on_step(self, sim_time: float) -> None:

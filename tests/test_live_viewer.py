@@ -61,7 +61,8 @@ def test_an_episode_is_played_into_the_viewer_with_its_estimate_and_views():
     assert viewer.close() == len(w.synced_times) > len(views)  # during the moves, and at each view
     assert w.closed and np.ptp(w.synced_times) > 0.0  # synced as the simulation ran
     assert w.user_scn.ngeom == 1 + len(views)  # the ellipsoid and a dot per view
-    final = views[-1].belief
+    final = episode.result.final_claim  # what the episode claims, not its bound
+    assert final.sigma_max_m < 0.9 * views[-1].belief.sigma_max_m
     ell = w.user_scn.geoms[0]
     assert ell.type == mujoco.mjtGeom.mjGEOM_ELLIPSOID
     assert np.allclose(ell.pos, final.centre_m)

@@ -50,6 +50,7 @@ BAD = {
     "benchmarks/bench_view_twins.py": (["--scenes", "0"], "--scenes"),
     "benchmarks/compare_horizon.py": (["--horizons", "1,9"], "--horizons"),
     "benchmarks/compare_planners.py": (["--seed", "x"], "--seed"),
+    "benchmarks/claim_moments.py": (["no_such_file.json"], "rows_json"),
     "benchmarks/honesty_tails.py": (["no_such_file.json"], "suite_json"),
 }
 

@@ -13,6 +13,12 @@ shape). ν follows from ρ: the t's 99.9% quantile of the NEES under P equals ρ
 
 For a t of ν dof, scale S and covariance P = ν/(ν-2)·S in d dimensions, (x-μ)ᵀS⁻¹(x-μ)/d is
 F(d, ν), so the NEES under P at probability p is d·(ν-2)/ν·F⁻¹(p; d, ν); χ²_d(p) as ν → ∞.
+
+The radius (the state's fourth component, where it has one) has a second moment of its own:
+its errors are not the centre's (lighter-tailed, a smaller share of the bound), so its
+variance in the claim is its bound's over ``radius_bound_scale`` (ρ_r = κ²/m_r, m_r its own
+moment scale, fitted beside m), the covariance scaled as D·P·D with D = diag(1/√ρ, 1/√ρ,
+1/√ρ, 1/√ρ_r): its correlations with the centre, and its being positive definite, kept.
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ from functools import cached_property
 
 import numpy as np
 
-from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.belief import RADIUS, Belief
 
 __all__ = ["DECISION_PROBABILITY", "GAUSSIAN", "ClaimShape", "claim_region", "share_within", "t_quantile"]
 
@@ -32,6 +38,10 @@ DECISION_PROBABILITY = 0.999
 scenario suite judges silent failures there."""
 
 _MIN_DOF, _MAX_DOF = 2.5, 1e6
+
+
+def _number(x: object) -> bool:
+    return not isinstance(x, bool) and isinstance(x, int | float) and math.isfinite(x)
 
 
 @dataclass(frozen=True)
@@ -45,32 +55,47 @@ class ClaimShape:
     """
 
     bound_scale: float = 1.0
+    radius_bound_scale: float | None = None
+    """ρ_r > 0: the bound's radius variance over the claim's (None: ``bound_scale``, as the
+    centre's). It may be below 1: the bound's radius is no region the loop decides with."""
 
     def __post_init__(self) -> None:
-        rho = self.bound_scale
-        if (
-            isinstance(rho, bool)
-            or not isinstance(rho, int | float)
-            or not (math.isfinite(rho) and rho >= 1.0)
-        ):
+        rho, rho_r = self.bound_scale, self.radius_bound_scale
+        if not _number(rho) or rho < 1.0:
             raise ValueError(f"bound_scale must be a finite number >= 1, got {rho!r}")
+        if rho_r is not None and (not _number(rho_r) or rho_r <= 0.0):
+            raise ValueError(f"radius_bound_scale must be a finite number > 0 or none, got {rho_r!r}")
 
     @classmethod
     def of_scales(
-        cls, tail_scale: float, moment_scale: float | None, name: str = "moment_scale"
+        cls,
+        tail_scale: float,
+        moment_scale: float | None,
+        name: str = "moment_scale",
+        radius_moment_scale: float | None = None,
     ) -> ClaimShape:
         """The shape of a claim whose bound is ``tail_scale`` (κ²) and whose covariance is
-        ``moment_scale`` (m) times one covariance: ρ = κ²/m (Gaussian where m is not known).
+        ``moment_scale`` (m) times one covariance: ρ = κ²/m (Gaussian where m is not known);
+        its radius' variance ``radius_moment_scale`` (m_r) times that one's, ρ_r = κ²/m_r
+        (None: as the centre's).
 
         Raises:
-            ValueError: naming ``name``, when m is not a finite number in (0, κ²]."""
+            ValueError: naming ``name`` (m_r's: ``radius_moment_scale`` in it), when m is not
+                a finite number in (0, κ²] or m_r not one > 0."""
         if moment_scale is None:
             return cls()
-        if not (math.isfinite(moment_scale) and 0.0 < moment_scale <= tail_scale * (1.0 + 1e-9)):
+        if not (_number(moment_scale) and 0.0 < moment_scale <= tail_scale * (1.0 + 1e-9)):
             raise ValueError(
                 f"{name} must be a finite number in (0, {tail_scale:g}] (its tail scale), or none"
             )
-        return cls(max(1.0, tail_scale / moment_scale))
+        if radius_moment_scale is not None and not (
+            _number(radius_moment_scale) and radius_moment_scale > 0.0
+        ):
+            raise ValueError(
+                f"{name.replace('moment_scale', 'radius_moment_scale')} must be a finite number > 0, or none"
+            )
+        rho_r = None if radius_moment_scale is None else tail_scale / radius_moment_scale
+        return cls(max(1.0, tail_scale / moment_scale), rho_r)
 
     @cached_property
     def dof(self) -> float:
@@ -95,12 +120,20 @@ class ClaimShape:
 
     def claim(self, bound: Belief) -> Belief:
         """The claim's own belief (mean, covariance) from its bound's."""
-        if self.bound_scale == 1.0:
-            return bound
-        return Belief(bound.mean, np.asarray(bound.cov) / self.bound_scale)
+        cov = np.asarray(bound.cov, dtype=float)
+        rho_r = self.radius_bound_scale
+        if cov.shape[0] <= RADIUS or rho_r is None or rho_r == self.bound_scale:
+            return bound if self.bound_scale == 1.0 else Belief(bound.mean, cov / self.bound_scale)
+        d = np.full(cov.shape[0], 1.0 / math.sqrt(self.bound_scale))
+        d[RADIUS] = 1.0 / math.sqrt(rho_r)
+        return Belief(bound.mean, cov * np.outer(d, d))
 
     def to_json(self) -> dict[str, float | None]:
-        return {"bound_scale": self.bound_scale, "dof": None if math.isinf(self.dof) else self.dof}
+        return {
+            "bound_scale": self.bound_scale,
+            "dof": None if math.isinf(self.dof) else self.dof,
+            "radius_bound_scale": self.radius_bound_scale,
+        }
 
 
 GAUSSIAN = ClaimShape()

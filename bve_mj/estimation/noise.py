@@ -29,18 +29,14 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaig
 - a part of the centre's error is **the fruit's own**, the same from every view: the
   silhouette of a real fruit (tilted, not quite a spheroid, shaded from above, a neighbour's
   edge beside it) puts the fitted centre a little off its true centre in the world, mostly
-  vertically. Views from elsewhere do not average it out: it is bounded, as a world-frame
-  offset with σ ``centre_bias_rel`` (horizontal, vertical) times the fruit's radius, added
-  to the centre's covariance the filter reports (:meth:`NoiseModel.centre_bias_cov`). How
-  far off a fruit's own centre is depends on the fruit: one alone is off by about 0.3% of
-  its radius (0.4% vertically), one with ripe neighbours on a third of its rim by twice
-  that (calibration seed 1). So the offset's variance, as a share of the radius², is
-  ``centre_offset_terms`` · (1, (k - 1)², n̄²)
-  (:data:`OFFSET_FEATURES`: the fruit type's shape index k and the mean neighbour share n̄
-  of the views fused), fitted by maximum likelihood over the
-  calibration fruits and sized so that 97.1% of their offsets lie within its 3σ
-  (:meth:`NoiseModel.centre_offset_cov`). Where what was seen is not known, the bound over
-  all fruits (``centre_bias_rel``) stands.
+  vertically, and views from elsewhere do not average it out. It is bounded as a world-frame
+  offset added to the centre's covariance the filter reports, whose variance as a share of
+  the radius² is ``centre_offset_terms`` · (1, (k - 1)², n̄²) (:data:`OFFSET_FEATURES`: the
+  shape index k and the mean neighbour share n̄ of the views fused), fitted by maximum
+  likelihood over the calibration fruits and sized so that 97.1% of their offsets lie within
+  its 3σ (:meth:`NoiseModel.centre_offset_cov`); where what was seen is not known, the bound
+  over all fruits, σ ``centre_bias_rel`` (horizontal, vertical) times the radius
+  (:meth:`NoiseModel.centre_bias_cov`).
 - the rest of a view's error is shared with views **from nearby directions** (they see
   nearly the same silhouette): the correlation ρ(θ) of two views' normalised errors against
   the angle between them, fitted per component (:mod:`bve_mj.estimation.view_correlation`;
@@ -61,9 +57,10 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaig
   --every-fruit``.
 - the errors are **heavy-tailed**: the claim is a Student-t (:mod:`bve_mj.estimation.
   claim_shape`) whose covariance is m (``moment_scale``) and whose 99.9% bound is κ²
-  (``tail_scale``) times the claim before them, both fitted on episode-like estimates (3-6
-  calibration views of a fruit fused and claimed as the loop does: :mod:`~bve_mj.estimation.
-  noise_tail`); the filter itself fuses with the variances.
+  (``tail_scale``) times the claim before them (the radius' variance m_r times,
+  ``radius_moment_scale``), fitted on episode-like estimates (3-6 calibration views of a fruit
+  fused and claimed as the loop does: :mod:`~bve_mj.estimation.noise_tail`); the filter
+  itself fuses with the variances.
 
 The fitted model is a JSON file; the package ships one (``default``) and settings name it
 (``measurement.noise_model``). It holds the camera it was made with: a model for another
@@ -131,6 +128,7 @@ class Outline:
 
 
 _CORRELATIONS = ("centre_correlation", "radius_correlation")
+_MOMENTS = ("moment_scale", "view_moment_scale", "radius_moment_scale")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -160,6 +158,9 @@ class NoiseModel:
             their second moment (κ² 1 and m None, Gaussian, in a file that does not say).
         view_tail_scale, view_moment_scale: the same of single views (their own offset bounded
             over all fruits): what size-only (range) episodes claim with.
+        radius_moment_scale: m_r > 0, the same of the radius alone in the episode-like
+            estimates (None, as the centre's, in a file that does not say). Size-only episodes
+            claim the radius as the centre: it is estimated with the range, from the same sizes.
         centre_offset_terms: coefficients (3,) of the fruit's own offset's variance [share of
             the radius²] on :data:`OFFSET_FEATURES`, or () (a file that does not say): the
             offset is then ``centre_bias_rel`` whatever was seen.
@@ -185,6 +186,7 @@ class NoiseModel:
     view_tail_scale: float = 1.0
     moment_scale: float | None = None
     view_moment_scale: float | None = None
+    radius_moment_scale: float | None = None
     centre_offset_terms: tuple[float, ...] = ()
     outlier_share: float = 0.0
     outlier_scale: float = 1.0
@@ -216,7 +218,9 @@ class NoiseModel:
     @property
     def claim_shape(self) -> ClaimShape:
         """The shape of an episode's claim (camera measurement): ρ = κ²/m, Gaussian without m."""
-        return ClaimShape.of_scales(self.tail_scale, self.moment_scale, "moment_scale")
+        return ClaimShape.of_scales(
+            self.tail_scale, self.moment_scale, "moment_scale", self.radius_moment_scale
+        )
 
     @property
     def view_claim_shape(self) -> ClaimShape:
@@ -239,12 +243,9 @@ class NoiseModel:
         """The terms of :data:`OFFSET_FEATURES` for a fruit of ``shape_index`` seen as
         ``outlines`` (one per view fused), (3,).
 
-        Only what belongs to the fruit: its type's shape and its neighbours (there from any
-        view). Not how much of its outline the views saw: in calibration the fruits seen in
-        part (leaves, the frame) are also the ones that err most, but an episode picks its
-        views, and a beefsteak seen whole from three of them was still 0.7% of its radius off
-        vertically (seed 6262, 3090971832): conditioned on the outline seen, it claimed no
-        offset at all and ended `converged` with NEES 58."""
+        Only what belongs to the fruit (its type's shape, its neighbours), not how much of its
+        outline the views saw: an episode picks its views, and a beefsteak seen whole from
+        three was still 0.7% of its radius off vertically (seed 6262, 3090971832)."""
         neighbour = float(np.mean([min(max(o.neighbour_share, 0.0), 1.0) for o in outlines]))
         return np.array([1.0, (shape_index - 1.0) ** 2, neighbour**2])
 
@@ -361,10 +362,7 @@ def load_noise_model(name: str = "default") -> NoiseModel:
                 "refusal_scale": float(values.get("refusal_scale", 0.0)),
                 "tail_scale": float(values.get("tail_scale", 1.0)),
                 "view_tail_scale": float(values.get("view_tail_scale", values.get("tail_scale", 1.0))),
-                **{
-                    k: None if values.get(k) is None else float(values[k])
-                    for k in ("moment_scale", "view_moment_scale")
-                },
+                **{k: None if values.get(k) is None else float(values[k]) for k in _MOMENTS},
                 "centre_offset_terms": tuple(float(x) for x in values.get("centre_offset_terms", ())),
                 "outlier_share": float(values.get("outlier_share", 0.0)),
                 "outlier_scale": float(values.get("outlier_scale", 1.0)),

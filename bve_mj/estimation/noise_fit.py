@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import replace
-from functools import partial
 from typing import Any
 
 import numpy as np
@@ -15,11 +14,11 @@ import numpy as np
 from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.noise import OFFSET_FEATURES, NoiseModel, Outline
-from bve_mj.estimation.noise_tail import FruitKey, episode_tails, fruit_key, view_tails
+from bve_mj.estimation.noise_tail import FruitKey, fit_claim_shape, fruit_key, row_sigmas
 from bve_mj.estimation.outliers import OutlierMixture, fit_outlier_mixture
 from bve_mj.estimation.view_correlation import ViewCorrelation, fit_view_correlation
 
-__all__ = ["GROSS_SIGMAS", "fit_noise_model", "noise_report"]
+__all__ = ["GROSS_SIGMAS", "fit_noise_model", "noise_report", "split_gross", "within_gross"]
 
 
 def fit_noise_model(
@@ -44,12 +43,8 @@ def fit_noise_model(
     ``outlier_rows`` (default ``rows``): the every-fruit detector's rows, which the tracker
     fuses with this model's σ, where the calibration measured them."""
     det = [r for r in rows if r.get("detected")]
-    if len(det) < 20:
-        raise ConfigError("calibration", len(det), "at least 20 detections to fit a noise model")
     f = camera.focal_px
-    first = _fit(det, camera, source)
-    z = _normalised(det, first)
-    kept = [r for r, zc in zip(det, z, strict=True) if zc <= GROSS_SIGMAS]
+    kept, refused = split_gross(rows, camera)
     model = _fit(kept, camera, source)
     # two levels: each fruit's own offset (the same from every view) and each view's own
     # error; the per-view noise is fitted to what is left once the offsets are taken out
@@ -62,21 +57,9 @@ def fit_noise_model(
     per_view = _without_offsets(kept, offsets, f)
     centre_corr, radius_corr = _view_correlations(per_view, model)
     model = replace(model, centre_correlation=centre_corr, radius_correlation=radius_corr)
-    refused = [r for r in rows if not r.get("detected")]
     refusal, fruits = _refusal_scale([*refused, *kept], model)
     model = replace(model, refusal_scale=refusal)
-    sigmas = partial(_row_sigmas, model)
-    (kappa2, moment), (view_kappa2, view_moment) = (
-        episode_tails(kept, refused, model, f, sigmas),
-        view_tails(kept, refused, model, f, sigmas),
-    )
-    model = replace(
-        model,
-        tail_scale=kappa2,
-        moment_scale=moment,
-        view_tail_scale=view_kappa2,
-        view_moment_scale=view_moment,
-    )
+    model = fit_claim_shape(kept, refused, model, f)
     mixture = _outlier_mixture([r for r in (outlier_rows or rows) if r.get("detected")], model, f)
     model = replace(model, outlier_share=mixture.share, outlier_scale=mixture.scale)
     report = noise_report(per_view, model)
@@ -86,22 +69,30 @@ def fit_noise_model(
     return model, report
 
 
+def split_gross(
+    rows: Sequence[dict[str, Any]], camera: CameraConfig
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """(kept, refused): the detections within :data:`GROSS_SIGMAS` of a first fit to all of
+    them, which the model is fitted to, and the views the detector refused."""
+    det = [r for r in rows if r.get("detected")]
+    if len(det) < 20:
+        raise ConfigError("calibration", len(det), "at least 20 detections to fit a noise model")
+    return within_gross(det, _fit(det, camera, "")), [r for r in rows if not r.get("detected")]
+
+
+def within_gross(det: Sequence[dict[str, Any]], model: NoiseModel) -> list[dict[str, Any]]:
+    """The detections within :data:`GROSS_SIGMAS` of ``model`` in every component."""
+    return [r for r, zc in zip(det, _normalised(det, model), strict=True) if zc <= GROSS_SIGMAS]
+
+
 def _outlier_mixture(det: Sequence[dict[str, Any]], model: NoiseModel, focal_px: float) -> OutlierMixture:
     """The scale mixture of these detections' own errors under ``model`` (each fruit's offset,
     from its views within :data:`GROSS_SIGMAS`, taken out of all of them)."""
     if not det:
         return OutlierMixture()
-    kept = [r for r, zc in zip(det, _normalised(det, model), strict=True) if zc <= GROSS_SIGMAS]
+    kept = within_gross(det, model)
     own = _without_offsets(det, _fruit_offsets(kept, model, focal_px), focal_px)
     return fit_outlier_mixture(np.square(_components(own, model).reshape(-1, 3)).sum(axis=1), 3)
-
-
-def _row_sigmas(model: NoiseModel, r: dict[str, Any]) -> tuple[float, float]:
-    """The model's σ of a calibration row's centre and apparent radius [px]."""
-    return model.sigmas_px(
-        r["radius_px"], r["arc_deg"], r["centre_fit_px"], r["radius_fit_px"], r["fruit_shape_index"],
-        r.get("neighbour_share", 0.0),
-    )  # fmt: skip
 
 
 GROSS_SIGMAS = 6.0
@@ -180,7 +171,7 @@ def _fruit_offsets(
         A, b, w = [], [], []
         for r in rows:
             R = np.asarray(r["camera_rotation"], dtype=float)
-            sc = _row_sigmas(model, r)[0]
+            sc = row_sigmas(model, r)[0]
             scale = r["distance_m"] / focal_px
             for axis, e in ((1, r["err_u_px"]), (2, r["err_v_px"])):
                 A.append(R[:, axis])
@@ -339,7 +330,7 @@ def _components(det: Sequence[dict[str, Any]], model: NoiseModel) -> np.ndarray:
     """The normalised errors (u, v, α) of these detections under ``model``, flattened."""
     out = []
     for r in det:
-        sc, sr = _row_sigmas(model, r)
+        sc, sr = row_sigmas(model, r)
         e = r["err_alpha_px"] - model.radius_bias(r["radius_px"])
         out += [r["err_u_px"] / sc, r["err_v_px"] / sc, e / sr]
     return np.array(out)
@@ -359,7 +350,7 @@ def _view_correlations(
             continue
         d = np.asarray(r["camera_position_m"], dtype=float) - np.asarray(r["truth_m"], dtype=float)
         R = np.asarray(r["camera_rotation"], dtype=float)
-        sc, sr = _row_sigmas(model, r)
+        sc, sr = row_sigmas(model, r)
         lateral = (R[:, 1] * r["err_u_px"] + R[:, 2] * r["err_v_px"]) / sc
         z_radius = (r["err_alpha_px"] - model.radius_bias(r["radius_px"])) / sr
         groups.setdefault(fruit_key(r), []).append((d / np.linalg.norm(d), lateral, z_radius))
@@ -381,7 +372,7 @@ def noise_report(rows: Sequence[dict[str, Any]], model: NoiseModel) -> dict[str,
     out: dict[str, Any] = {"detections": len(rows)}
     zc, zr, ec, er = [], [], [], []
     for r in rows:
-        sc, sr = _row_sigmas(model, r)
+        sc, sr = row_sigmas(model, r)
         zc += [r["err_u_px"] / sc, r["err_v_px"] / sc]
         ec += [r["err_u_px"], r["err_v_px"]]
         e = r["err_alpha_px"] - model.radius_bias(r["radius_px"])

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any
+from dataclasses import replace
+from functools import partial
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -18,12 +20,30 @@ __all__ = [
     "TAIL_DRAWS",
     "TAIL_PROBABILITY",
     "FruitKey",
+    "Tails",
     "episode_tails",
+    "fit_claim_shape",
     "fruit_key",
+    "row_sigmas",
     "view_tails",
 ]
 
 FruitKey = tuple[Any, Any, Any]
+
+
+class Tails(NamedTuple):
+    """What a claim's shape is fitted from (:class:`~bve_mj.estimation.claim_shape.ClaimShape`).
+
+    Attributes:
+        tail_scale: κ² ≥ 1, the bound over the claim before it.
+        moment_scale: m ≤ κ², the centre's second moment over the claim before κ² (None: too
+            few draws).
+        radius_moment_scale: m_r > 0, the radius' (None: too few draws).
+    """
+
+    tail_scale: float
+    moment_scale: float | None = None
+    radius_moment_scale: float | None = None
 
 
 def fruit_key(row: dict[str, Any]) -> FruitKey:
@@ -54,8 +74,8 @@ def episode_tails(
     model: NoiseModel,
     focal_px: float,
     sigmas_px: Callable[[dict[str, Any]], tuple[float, float]],
-) -> tuple[float, float | None]:
-    """(κ², m): the claim's tail scale and moment scale from episode-like estimates.
+) -> Tails:
+    """(κ², m, m_r): the claim's tail scale and moment scales from episode-like estimates.
 
     κ² ≥ 1: how much the covariance an episode claims must grow for its χ²₃ ellipsoid at
     :data:`TAIL_PROBABILITY` to hold that share of the errors of episode-like estimates.
@@ -80,7 +100,9 @@ def episode_tails(
     m ≤ κ²: the mean of the same draws' NEES over 3 (each fruit weighted alike): the share of
     the claim before κ² that is the errors' second moment (None with too few fruits, as κ² is
     then 1). The claim's covariance is m times it, its bound κ² times it
-    (:class:`~bve_mj.estimation.claim_shape.ClaimShape`, ρ = κ²/m)."""
+    (:class:`~bve_mj.estimation.claim_shape.ClaimShape`, ρ = κ²/m). m_r: the same of the
+    radius alone, its squared error over its claimed variance before κ² (its errors are not
+    the centre's: lighter-tailed, and a smaller share of what the claim holds)."""
     from bve_mj.estimation.metrics import chi2_quantile
     from bve_mj.estimation.models import BearingSizeModel
     from bve_mj.estimation.view_correlation import new_view_share
@@ -92,11 +114,13 @@ def episode_tails(
     shares = _refusals([*kept, *refused])
     fruits = {key: rows for key, rows in views_of.items() if len(rows) >= 4}
     if len(fruits) < 20:
-        return 1.0, None
+        return Tails(1.0)
     rng = np.random.default_rng(0)
     nees: list[list[float]] = []  # per fruit, its draws
+    radius_nees: list[list[float]] = []
     for key, rows in fruits.items():
         nees.append([])
+        radius_nees.append([])
         truth, radius = np.asarray(rows[0]["truth_m"], dtype=float), float(rows[0]["true_radius_m"])
         x = np.r_[truth, radius]
         prior_info = np.diag([1.0 / 0.05**2] * 3 + [1.0 / (0.087 * radius) ** 2])  # a wide prior
@@ -143,6 +167,7 @@ def episode_tails(
             outlines = [Outline(float(r.get("neighbour_share", 0.0))) for r in drawn]
             claim = (P[:3, :3] * s2 + model.centre_offset_cov(radius, shape_index, outlines)) * refusal
             nees[-1].append(float(dx[:3] @ np.linalg.solve(claim, dx[:3])))
+            radius_nees[-1].append(float(dx[3] ** 2 / (P[3, 3] * s2 * refusal)))
     # the quantile rests on a handful of fruits: bound it by the fruits' bootstrap
     per_fruit = np.array(nees)
     q = [
@@ -151,7 +176,7 @@ def episode_tails(
     ]
     ratio = float(np.quantile(q, TAIL_BOUND)) / float(chi2_quantile(TAIL_PROBABILITY, 3))
     kappa2 = max(1.0, ratio)
-    return kappa2, min(float(np.mean(per_fruit)) / 3.0, kappa2)
+    return Tails(kappa2, min(float(np.mean(per_fruit)) / 3.0, kappa2), float(np.mean(radius_nees)))
 
 
 def view_tails(
@@ -160,8 +185,8 @@ def view_tails(
     model: NoiseModel,
     focal_px: float,
     sigmas_px: Callable[[dict[str, Any]], tuple[float, float]],
-) -> tuple[float, float | None]:
-    """(κ², m) of single views. κ² ≥ 1: how much the covariance a view claims (its noise, the fruit's
+) -> Tails:
+    """(κ², m, m_r) of single views. κ² ≥ 1: how much the covariance a view claims (its noise, the fruit's
     own offset bounded over all fruits, the refusal scale of its fruit) must grow for its χ²₃
     ellipsoid at :data:`TAIL_PROBABILITY` to hold that share of the calibration views'
     errors: the empirical quantile of their squared normalised errors over χ²₃'s.
@@ -170,7 +195,9 @@ def view_tails(
     camera measurement, and an episode that measures the apparent size alone (10-16 views,
     its centre trilaterated from sizes) is not one of them; until such episodes are drawn,
     they keep this wider bound (``NoiseModel.view_tail_scale``). m ≤ κ²: the mean of the
-    views' squared normalised errors over 3, their second moment (None with too few views)."""
+    views' squared normalised errors over 3, their second moment (None with too few views).
+    No m_r: a size-only episode estimates the radius with the range, from the same sizes, so
+    its radius errs as its centre does, not as a single view's apparent size."""
     from bve_mj.estimation.metrics import chi2_quantile
 
     refused_of = _refusals([*kept, *refused])
@@ -188,10 +215,35 @@ def view_tails(
         ea = r["err_alpha_px"] - model.radius_bias(r["radius_px"])
         z2.append((float(e @ np.linalg.solve(lateral, e)) + (ea / sr) ** 2) / scale)
     if len(z2) < 100:
-        return 1.0, None
+        return Tails(1.0)
     ratio = float(np.quantile(z2, TAIL_PROBABILITY)) / float(chi2_quantile(TAIL_PROBABILITY, 3))
     kappa2 = max(1.0, ratio)
-    return kappa2, min(float(np.mean(z2)) / 3.0, kappa2)
+    return Tails(kappa2, min(float(np.mean(z2)) / 3.0, kappa2))
+
+
+def fit_claim_shape(
+    kept: Sequence[dict[str, Any]], refused: Sequence[dict[str, Any]], model: NoiseModel, focal_px: float
+) -> NoiseModel:
+    """``model`` with the claim's tail and moment scales (κ², m, m_r) of episode-like estimates
+    (:func:`episode_tails`) and of single views (:func:`view_tails`) fitted to calibration
+    rows under it: ``kept`` the detections within ``noise_fit.GROSS_SIGMAS`` σ of it
+    (``noise_fit.within_gross``), ``refused`` the views the detector refused."""
+    sigmas = partial(row_sigmas, model)
+    tails = episode_tails(kept, refused, model, focal_px, sigmas)
+    view = view_tails(kept, refused, model, focal_px, sigmas)
+    return replace(
+        model, tail_scale=tails.tail_scale, moment_scale=tails.moment_scale,
+        radius_moment_scale=tails.radius_moment_scale, view_tail_scale=view.tail_scale,
+        view_moment_scale=view.moment_scale,
+    )  # fmt: skip
+
+
+def row_sigmas(model: NoiseModel, r: dict[str, Any]) -> tuple[float, float]:
+    """The model's σ of a calibration row's centre and apparent radius [px]."""
+    return model.sigmas_px(
+        r["radius_px"], r["arc_deg"], r["centre_fit_px"], r["radius_fit_px"], r["fruit_shape_index"],
+        r.get("neighbour_share", 0.0),
+    )  # fmt: skip
 
 
 def _refusals(rows: Sequence[dict[str, Any]]) -> dict[FruitKey, list[bool]]:

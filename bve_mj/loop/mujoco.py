@@ -18,10 +18,11 @@ import numpy as np
 from bve_mj.config import Settings, settings_to_dict, with_overrides
 from bve_mj.config.experiments import EXPERIMENTS
 from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.claim_shape import GAUSSIAN, ClaimShape
 from bve_mj.estimation.noise import INNOVATION_PRIOR_DOF
 from bve_mj.estimation.view_correlation import ViewCorrelation
 from bve_mj.loop.arm_clearance import ClearMovesPlanner
-from bve_mj.loop.claims import Claims
+from bve_mj.loop.claims import Claims, shape_of
 from bve_mj.loop.episode import EpisodeResult, StopRules, ViewRecord, run_episode
 from bve_mj.loop.faults import FaultyPlanner, FaultyWorld
 from bve_mj.loop.outcomes import Outcome
@@ -50,7 +51,9 @@ __all__ = [
 class Recorder(Protocol):
     """What an episode recorder (``bve_mj.reporting.video.EpisodeRecorder``) offers the episode."""
 
-    def attach(self, world: MujocoWorld, prior: Belief) -> None: ...
+    def attach(self, world: MujocoWorld, prior: Belief, shape: ClaimShape = GAUSSIAN) -> None:
+        """Called once before the first view: ``shape`` the claim's (each view's belief is its
+        bound; ``shape.claim`` of it is what the view claims)."""
 
     def on_step(self, sim_time: float) -> None: ...
 
@@ -325,8 +328,6 @@ def episode_parts(
         on_step=None if recorder is None else recorder.on_step,
         noise=start.noise, detector=detector,
     )  # fmt: skip
-    if recorder is not None:
-        recorder.attach(world, prior)
     names = episode_constraints(s)
     experiment = EXPERIMENTS[ep.experiment.upper()]
     planner: Planner = ClearMovesPlanner(
@@ -348,4 +349,6 @@ def episode_parts(
             size_only=s.measurement.kind not in ("camera", "auto"),
         )  # fmt: skip
         correlation = (world.noise.centre_correlation, world.noise.radius_correlation)
+    if recorder is not None:
+        recorder.attach(world, prior, shape_of(claims))
     return EpisodeParts(world, loop_world, planner, stop, claims, correlation)

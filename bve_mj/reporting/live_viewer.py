@@ -22,6 +22,7 @@ import numpy as np
 
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.claim_shape import GAUSSIAN, ClaimShape
 
 if TYPE_CHECKING:
     from bve_mj.loop.records import ViewRecord
@@ -80,12 +81,14 @@ class LiveViewer:
         self._launch = launch or _launch_passive
         self.handle: Any = None
         self._belief: Belief | None = None
+        self._shape: ClaimShape = GAUSSIAN
         self._views: list[np.ndarray] = []
         self._last_sync = -np.inf
         self.syncs = 0
 
-    def attach(self, world: MujocoWorld, prior: Belief) -> None:
+    def attach(self, world: MujocoWorld, prior: Belief, shape: ClaimShape = GAUSSIAN) -> None:
         self.handle = self._launch(world.model, world.data)
+        self._shape = shape
         self._belief = prior
         self._draw()
         self._sync()
@@ -95,7 +98,7 @@ class LiveViewer:
             self._sync()
 
     def on_view(self, record: ViewRecord) -> None:
-        self._belief = record.belief
+        self._belief = self._shape.claim(record.belief)  # what the view claims: its belief is the bound
         self._views.append(np.asarray(record.p_world_camera, dtype=float).copy())
         self._draw()
         self._sync()

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.claim_shape import GAUSSIAN, ClaimShape
 from bve_mj.loop.episode import ViewRecord
 from bve_mj.reporting.outside_view import OutsideVideo
 from bve_mj.reporting.overlay import (
@@ -58,13 +59,15 @@ class EpisodeRecorder(OutsideVideo):
     def __init__(self, path: str | Path, fps: int = 25, hold_view_s: float = 0.4) -> None:
         super().__init__(path, fps, hold_view_s)
         self._belief: Belief | None = None
+        self._shape: ClaimShape = GAUSSIAN
         self._view = 0
         self._fruit = np.zeros(3)
         self._radius = 0.0
 
     # -- wiring
-    def attach(self, world: MujocoWorld, prior: Belief) -> None:
+    def attach(self, world: MujocoWorld, prior: Belief, shape: ClaimShape = GAUSSIAN) -> None:
         self._open(world)
+        self._shape = shape
         self._belief = prior.position
         self._fruit = np.asarray(world.p_world_fruit, dtype=float)
         self._radius = float(world.info.target.radius_m)
@@ -73,16 +76,17 @@ class EpisodeRecorder(OutsideVideo):
     def on_view(self, record: ViewRecord) -> None:
         if self._writer is None:
             return
-        self._belief = record.belief.position
+        claim = self._shape.claim(record.belief)  # what the view claims (its belief is the bound)
+        self._belief = claim.position
         self._view = record.iteration
         here = self._mark_view()
         w = self.world
         if w.last.image is not None:
-            err = _mm(float(np.linalg.norm(record.belief.centre_m - self._fruit)))
-            sig = _mm(record.belief.sigma_max_m)
+            err = _mm(float(np.linalg.norm(claim.centre_m - self._fruit)))
+            sig = _mm(claim.sigma_max_m)
             caption = f"eye-in-hand, view {record.iteration}: error {err}, sigma max {sig}"
             prior = w.fruit_prior
-            r, sd = record.belief.radius_m, record.belief.radius_sigma_m
+            r, sd = claim.radius_m, claim.radius_sigma_m
             self._eye = draw_detection(
                 w.last.image, w.last.detection, caption,
                 assumed_radius_m=None if prior is None else float(prior.radius_m),
