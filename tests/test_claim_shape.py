@@ -8,7 +8,7 @@ import pytest
 
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.claim_shape import GAUSSIAN, ClaimShape
-from bve_mj.estimation.metrics import CONSISTENCY_LEVELS, chi2_quantile, consistency_curve
+from bve_mj.estimation.metrics import CONSISTENCY_LEVELS, chi2_quantile, consistency_curve, nees_band
 
 
 def _t_samples(rng, nu, cov, n):
@@ -106,6 +106,33 @@ def test_the_consistency_curve_needs_one_dof_per_value():
     mixed = dict(consistency_curve([1.0, 30.0], tail_dofs=[None, 3.0]))
     assert mixed[0.999] == 1.0  # 30 is inside the t(3)'s 99.9% region, not the Gaussian's
     assert dict(consistency_curve([1.0, 30.0]))[0.999] == 0.5
+
+
+def test_the_band_of_mean_nees_is_the_claims_shapes(rng):
+    """20 honest episodes: a Gaussian claim's band is the χ² one; a Student-t claim's band
+    holds 95% of the means of its own honest NEES (drawn here independently of the band's
+    draws), where the χ² band holds only ~75% of them, and it is wider on both sides; one
+    radius (1-D) the same; a huge ν is the χ² band again."""
+    from bve_mj.errors import BveError
+
+    n, shape = 20, ClaimShape(3.38)
+    lo, hi = (float(x) / n for x in chi2_quantile(np.array([0.025, 0.975]), 3 * n))
+    assert nees_band(n) == pytest.approx((lo, hi))
+    assert nees_band(n, tail_dofs=[None] * n) == pytest.approx((lo, hi))
+    assert nees_band(n, tail_dofs=[1e9] * n) == pytest.approx((lo, hi), rel=0.02)
+    for dim in (3, 1):
+        t_lo, t_hi = nees_band(n, dim, tail_dofs=[shape.dof] * n)
+        g_lo, g_hi = nees_band(n, dim)
+        assert t_lo < g_lo and t_hi > g_hi + 0.2 * dim
+        e = _t_samples(rng, shape.dof, np.eye(3), 20_000 * n)[:, :dim]
+        means = np.einsum("ni,ni->n", e, e).reshape(-1, n).mean(1)
+        assert np.mean((means >= t_lo) & (means <= t_hi)) == pytest.approx(0.95, abs=0.01)
+        assert np.mean((means >= g_lo) & (means <= g_hi)) < 0.85
+    assert nees_band(n, tail_dofs=[shape.dof] * n) == nees_band(n, tail_dofs=[shape.dof] * n)  # seeded
+    with pytest.raises(BveError, match="one dof > 2"):
+        nees_band(n, tail_dofs=[5.0] * (n - 1))
+    with pytest.raises(BveError, match="one dof > 2"):
+        nees_band(2, tail_dofs=[5.0, 1.5])
 
 
 @pytest.mark.parametrize("bad", [0.99, -1.0, math.inf, math.nan, True, "2"])

@@ -13,6 +13,7 @@ import pytest
 from bve_mj.campaigns.scenarios import SILENT_NEES, load_suite, run_suite, suite_dir, suite_json
 from bve_mj.cli import main
 from bve_mj.config import EpisodeConfig
+from bve_mj.estimation.metrics import nees_band
 from bve_mj.estimation.noise import load_noise_model
 from bve_mj.loop.mujoco import detection_prior, run_mujoco_episode
 from bve_mj.robot import arm_kinematics
@@ -111,6 +112,16 @@ def test_runner_table_and_json(tmp_path):
         r["outcome"] in exit_0 and r["nees"] > region for r in clean["runs"]
     )
     assert doc["settings"]["clean"]["measurement"]["kind"] == "camera"
+    # the mean NEES' band is the claims' shape's (a Student-t's: wider than the χ² band the
+    # filter's own NEES is judged by), and so is the radius'
+    assert clean["claim_nees_band_95"] == pytest.approx(nees_band(2, tail_dofs=[shape.dof] * 2))
+    assert clean["claim_nees_band_95"][1] > clean["nees_band_95"][1]
+    assert clean["radius_nees_band_95"] == pytest.approx(nees_band(2, 1, tail_dofs=[shape.dof] * 2))
+    for r in clean["runs"]:  # what the views its claim fused saw, for studies of the claim
+        f = r["claim_features"]
+        assert 1 <= f["accepted"] <= r["accepted_views"] and 0.0 <= f["refused_share"] <= 1.0
+        assert 0.0 <= f["neighbour_share"] <= 1.0 and 0.0 < f["arc_deg"] <= 360.0 and f["radius_px"] > 0.0
+        assert f["nis_per_dof"] >= 0.0
 
 
 def test_measurement_option_overrides_each_file_only_when_given():

@@ -52,6 +52,7 @@ BAD = {
     "benchmarks/compare_planners.py": (["--seed", "x"], "--seed"),
     "benchmarks/claim_moments.py": (["no_such_file.json"], "rows_json"),
     "benchmarks/honesty_tails.py": (["no_such_file.json"], "suite_json"),
+    "benchmarks/episode_claims.py": (["no_such_file.json", "--check", "README.md"], "calibration"),
 }
 
 

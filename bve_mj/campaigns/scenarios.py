@@ -33,6 +33,7 @@ import numpy as np
 from bve_mj.campaigns.executors import local_batches
 from bve_mj.campaigns.runs import radius_metrics
 from bve_mj.campaigns.spec import episode_seed
+from bve_mj.campaigns.suite_table import format_suite
 from bve_mj.config import FilterKind, MeasurementKind, Settings, StateKind, load_settings, settings_to_dict
 from bve_mj.errors import BveError, ConfigError
 from bve_mj.estimation.claim_shape import share_within
@@ -169,7 +170,37 @@ def _run_one(name: str, settings: Settings, seed: int, run: int) -> dict[str, An
         "estimate_m": final.centre_m.tolist(),
         "cramer_rao_mm": ep.cramer_rao_mm(),
         **radius_metrics(final, ep.true_radius_m),
+        "claim_features": claim_features(ep.result.views),
         "wall_s": ep.result.wall_s,
+    }
+
+
+def claim_features(views: Sequence[Any]) -> dict[str, float | int | None]:
+    """What the loop saw of the fruit in the views its final claim fused (those accepted
+    since the last belief reset), for studies of the claim against the truth: the accepted
+    views, the mean ``neighbour_share``, ``arc_deg``, ``trimmed_fraction`` and apparent
+    ``radius_px`` of their detections, the mean NIS per measured dimension (``nis_per_dof``,
+    the correlation between views not discounted) and the share of all views in which the
+    detector refused the fruit (``refused_share``). None where no view was accepted."""
+    start = max((k for k, v in enumerate(views) if v.has("belief_reset")), default=0)
+    fused = [v for v in views[start:] if v.accepted and isinstance(v.world, dict)]
+    dets = [v.world.get("detection") or {} for v in fused]
+    dets = [d for d in dets if "radius_px" in d]
+
+    def mean(key: str) -> float | None:
+        xs = [float(d[key]) for d in dets if d.get(key) is not None]
+        return float(np.mean(xs)) if xs else None
+
+    dims = [len(v.world.get("measurement", {}).get("z", ())) or 3 for v in fused]
+    nis = sum(float(v.nis) for v in fused if math.isfinite(v.nis))
+    return {
+        "accepted": len(fused),
+        "neighbour_share": mean("neighbour_share"),
+        "arc_deg": mean("arc_deg"),
+        "trimmed_fraction": mean("trimmed_fraction"),
+        "radius_px": mean("radius_px"),
+        "nis_per_dof": nis / sum(dims) if fused else None,
+        "refused_share": sum(not v.measured for v in views) / len(views) if views else None,
     }
 
 
@@ -230,6 +261,7 @@ class SuiteResult:
         filter_nees = np.array([r.get("filter_nees", math.nan) for r in ok]) if ok else np.array([math.nan])
         r_err = np.array([abs(r["radius_error_mm"]) for r in ok if r.get("radius_error_mm") is not None])
         r_nees = np.array([r["radius_nees"] for r in ok if r.get("radius_nees") is not None])
+        r_dofs = [r.get("claim_dof") for r in ok if r.get("radius_nees") is not None]
         crb = np.array(
             [r["error_mm"] / r["cramer_rao_mm"] for r in ok if np.isfinite(r.get("cramer_rao_mm", math.nan))]
         )
@@ -244,6 +276,7 @@ class SuiteResult:
             "nees_mean": float(np.mean(nees)),
             "filter_nees_mean": float(np.mean(filter_nees)),
             "nees_band_95": nees_band(len(ok)) if ok else (math.nan, math.nan),
+            "claim_nees_band_95": nees_band(len(ok), tail_dofs=dofs) if ok else (math.nan, math.nan),
             "inside_3sigma_pct": float(np.mean(nees <= 9.0) * 100.0) if ok else math.nan,
             "inside_3sigma_honest_pct": float(np.mean([100 * share_within(d, 9) for d in dofs] or math.nan)),
             "consistency": consistency_curve(nees, tail_dofs=dofs) if ok else [],
@@ -252,6 +285,9 @@ class SuiteResult:
                 "p95": float(np.percentile(r_err, 95)) if r_err.size else math.nan,
             },
             "radius_nees_mean": float(np.mean(r_nees)) if r_nees.size else math.nan,
+            "radius_nees_band_95": (
+                nees_band(r_nees.size, 1, tail_dofs=r_dofs) if r_nees.size else (math.nan, math.nan)
+            ),
             "error_to_crb_median": float(np.median(crb)) if crb.size else math.nan,
             "silent_failures": sum(bool(r.get("silent_failure")) for r in rows),
             "answered_outside": sum(bool(r.get("answered_outside")) for r in rows),
@@ -324,56 +360,6 @@ def run_rows(
         if progress is not None:
             progress(done, total)
     return [{name: tuple(sorted(r, key=lambda x: x["run"])) for name, r in c.items()} for c in collected]
-
-
-def format_suite(summaries: dict[str, dict[str, Any]], markdown: bool = False) -> list[str]:
-    """The table, from :meth:`SuiteResult.summary` (or ``--json``'s ``scenarios``): scenario |
-    outcomes | error median / p95 / max [mm] | mean NEES of the claim and of the filter | inside
-    3σ % | silent failures | median views | wall s."""
-
-    def num(x: Any, spec: str) -> str:
-        return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
-
-    def flagged(nees: Any, band: Sequence[float]) -> str:  # * outside the band of honest means
-        known = nees is not None and math.isfinite(nees) and all(map(math.isfinite, band))
-        return num(nees, ".2f") + ("*" if known and not band[0] <= nees <= band[1] else "")
-
-    cols = ("scenario", "outcomes", "median mm", "p95 mm", "max mm", "NEES", "filter", "in3σ%", "silent",
-            "exit0 out", "r err mm", "r NEES", "err/CRB", "views", "wall s")  # fmt: skip
-    rows = []
-    for name, s in summaries.items():
-        e = s["error_mm"]
-        band = s.get("nees_band_95", (math.nan, math.nan))
-        rows.append((
-            name, " ".join(f"{k}:{v}" for k, v in sorted(s["outcomes"].items())),
-            num(e["median"], ".2f"), num(e["p95"], ".2f"), num(e["max"], ".2f"),
-            flagged(s["nees_mean"], band), flagged(s.get("filter_nees_mean"), band),
-            num(s["inside_3sigma_pct"], ".0f"), str(s["silent_failures"]),
-            str(s.get("answered_outside", "-")),
-            num(s.get("radius_error_mm", {}).get("median"), ".2f"), num(s.get("radius_nees_mean"), ".2f"),
-            num(s.get("error_to_crb_median"), ".2f"), num(s["views_median"], ".1f"), num(s["wall_s"], ".1f"),
-        ))  # fmt: skip
-    honest = sorted({f"{s.get('inside_3sigma_honest_pct', 97.07):.1f}%" for s in summaries.values()})
-    note = (
-        "error: final ‖estimate - truth‖ [mm]; NEES: mean (3 if honest; * outside the 95% band of the "
-        "mean of that many honest episodes); filter: the same of the filter's own covariance, before "
-        "the claim adds the fruit's own offset and scales it (innovations, refusals, tails); in3σ%: "
-        f"truth inside the final 3σ ellipsoid ({'/'.join(honest)} if honest: 97.1% for a Gaussian "
-        "claim, less for a Student-t); silent: a success outcome (converged, stable, approached) with "
-        "the truth outside the claim's 99.9% region (its bound's 99.9% ellipsoid); exit0 out: the same for "
-        "every outcome that exits 0 (stalled and max_views too: their estimate is an answer, though "
-        "not a claim that it is done); r err: median |radius error| [mm] and r NEES its mean NEES (1 "
-        "if honest); err/CRB: median of the final error over √tr of the Cramér-Rao bound of the views "
-        "taken; views: median per episode; wall: sum of the episodes' wall times"
-    )
-    if markdown:
-        lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-        lines += ["| " + " | ".join(r) + " |" for r in rows]
-        return [*lines, "", note]
-    widths = [max(len(c), *(len(r[i]) for r in rows)) for i, c in enumerate(cols)]
-    fmt = "  ".join(f"{{:<{w}}}" if i < 2 else f"{{:>{w}}}" for i, w in enumerate(widths))
-    head = fmt.format(*cols)
-    return [head, "-" * len(head), *(fmt.format(*r) for r in rows), note]
 
 
 def suite_json_clean(x: Any) -> Any:
