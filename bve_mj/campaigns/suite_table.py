@@ -11,9 +11,9 @@ __all__ = ["format_suite"]
 
 
 def format_suite(summaries: dict[str, dict[str, Any]], markdown: bool = False) -> list[str]:
-    """The table, from :meth:`bve_mj.campaigns.scenarios.SuiteResult.summary` (or ``--json``'s ``scenarios``): scenario |
-    outcomes | error median / p95 / max [mm] | mean NEES of the claim and of the filter | inside
-    3σ % | silent failures | median views | wall s."""
+    """The table, from :meth:`bve_mj.campaigns.scenarios.SuiteResult.summary` (or
+    ``--json``'s ``scenarios``): scenario | outcomes | error median / p95 / max [mm] | mean NEES
+    of the claim and of the filter | inside 3σ % | silent failures | median views | wall s."""
 
     def num(x: Any, spec: str) -> str:
         return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
