@@ -135,7 +135,7 @@ def nees_band(
     ν, one per episode): the NEES of an honest one under its covariance is
     χ²_dof·(ν-2)/χ²_ν, whose mean over a few episodes spreads far wider than the χ² band says
     (20 episodes of ν = 5.3: 75% of honest means fall in the Gaussian band, 2.02-4.16; their
-    own band is 1.58-5.62); the band is then the quantiles of ``draws`` seeded Monte Carlo
+    own band is 1.59-5.69); the band is then the quantiles of ``draws`` seeded Monte Carlo
     means (the same band for the same input, to 1-2% of its width).
 
     Raises:
