@@ -38,6 +38,7 @@ from bve_mj.config import FilterKind, MeasurementKind, Settings, StateKind, load
 from bve_mj.errors import BveError, ConfigError
 from bve_mj.estimation.claim_shape import share_within
 from bve_mj.estimation.metrics import consistency_curve, nees_band
+from bve_mj.loop.records import since_reset
 
 __all__ = [
     "SILENT_NEES",
@@ -182,8 +183,7 @@ def claim_features(views: Sequence[Any]) -> dict[str, float | int | None]:
     ``radius_px`` of their detections, the mean NIS per measured dimension (``nis_per_dof``,
     the correlation between views not discounted) and the share of all views in which the
     detector refused the fruit (``refused_share``). None where no view was accepted."""
-    start = max((k for k, v in enumerate(views) if v.has("belief_reset")), default=0)
-    fused = [v for v in views[start:] if v.accepted and isinstance(v.world, dict)]
+    fused: list[Any] = [v for v in since_reset(views) if v.accepted and isinstance(v.world, dict)]
     dets = [v.world.get("detection") or {} for v in fused]
     dets = [d for d in dets if "radius_px" in d]
 

@@ -46,10 +46,13 @@ KNOWN_SIZE_REL = 0.25
 @dataclass(frozen=True)
 class Sighting:
     """One fruit measured in one view: z = (t_y/t_x, t_z/t_x, α) and its model (the camera's
-    pose at the view and the measurement's covariance)."""
+    pose at the view and the measurement's covariance); ``sensor_cov``: the part of that
+    covariance the declared sensor errors make (encoder noise), None where none
+    (:mod:`bve_mj.estimation.sensor_share`)."""
 
     z: np.ndarray
     model: BearingSizeModel
+    sensor_cov: np.ndarray | None = None
 
 
 def belief_from_detection(

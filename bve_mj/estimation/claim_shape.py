@@ -19,6 +19,13 @@ its errors are not the centre's (lighter-tailed, a smaller share of the bound), 
 variance in the claim is its bound's over ``radius_bound_scale`` (ρ_r = κ²/m_r, m_r its own
 moment scale, fitted beside m), the covariance scaled as D·P·D with D = diag(1/√ρ, 1/√ρ,
 1/√ρ, 1/√ρ_r): its correlations with the centre, and its being positive definite, kept.
+
+The shape is the detector's: its errors are what ρ and ρ_r were fitted on. The share of the
+filter's covariance the declared sensor errors make (the calibration biases' prior, encoder
+noise: :mod:`bve_mj.estimation.sensor_share`) is Gaussian and as honest as their declared σ;
+where a view knows it (``sensor_cov``, G as the bound holds it: :meth:`bve_mj.loop.claims.
+Claims.sensor_part`) the claim is G + D·(bound − G)·D (a Gaussian plus a t: the t's regions,
+used for both, are conservative).
 """
 
 from __future__ import annotations
@@ -118,15 +125,19 @@ class ClaimShape:
         of its mass: χ²_dim(p) for a Gaussian claim."""
         return claim_region(self.dof, probability, dim)
 
-    def claim(self, bound: Belief) -> Belief:
-        """The claim's own belief (mean, covariance) from its bound's."""
+    def claim(self, bound: Belief, sensor_cov: np.ndarray | None = None) -> Belief:
+        """The claim's own belief (mean, covariance) from its bound's; ``sensor_cov`` (G, the
+        declared sensor errors' share of the bound, (n, n)) is kept whole."""
+        if self.bound_scale == 1.0 and self.radius_bound_scale in (None, 1.0):
+            return bound
         cov = np.asarray(bound.cov, dtype=float)
-        rho_r = self.radius_bound_scale
-        if cov.shape[0] <= RADIUS or rho_r is None or rho_r == self.bound_scale:
-            return bound if self.bound_scale == 1.0 else Belief(bound.mean, cov / self.bound_scale)
+        g = None if sensor_cov is None else np.asarray(sensor_cov, dtype=float)
         d = np.full(cov.shape[0], 1.0 / math.sqrt(self.bound_scale))
-        d[RADIUS] = 1.0 / math.sqrt(rho_r)
-        return Belief(bound.mean, cov * np.outer(d, d))
+        if cov.shape[0] > RADIUS and self.radius_bound_scale is not None:
+            d[RADIUS] = 1.0 / math.sqrt(self.radius_bound_scale)
+        if g is None:
+            return Belief(bound.mean, cov * np.outer(d, d))
+        return Belief(bound.mean, (cov - g) * np.outer(d, d) + g)
 
     def to_json(self) -> dict[str, float | None]:
         return {

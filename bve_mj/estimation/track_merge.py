@@ -23,6 +23,7 @@ import numpy as np
 from bve_mj.errors import EstimationError
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.ekf import nis_threshold
+from bve_mj.estimation.sensor_share import added, calibration_information
 
 if TYPE_CHECKING:
     from bve_mj.estimation.tracks import Track
@@ -62,6 +63,9 @@ def merge_duplicates(
                 keep, drop = (a, b) if (a.hits, -a.id) >= (b.hits, -b.id) else (b, a)
                 if fused is not None and (agree or not (a.views & b.views)):
                     keep.belief = fused if agree else Belief(fused.mean, fused.cov * max(chi2 / 4.0, 1.0))
+                    prior = calibration_information(fused.dim, calibration_sigmas)  # counted once
+                    both_info = added(a.sensor_info, b.sensor_info)
+                    keep.sensor_info = both_info if both_info is None or prior is None else both_info - prior
                 keep.hits += drop.hits
                 keep.views |= drop.views
                 for q in drop.viewpoints:

@@ -53,6 +53,7 @@ from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.ekf import UpdateResult, nis_threshold
 from bve_mj.estimation.models import BearingSizeModel
 from bve_mj.estimation.outliers import OutlierMixture, mixture_update
+from bve_mj.estimation.sensor_share import added, calibration_information, measurement_information
 from bve_mj.estimation.track_merge import merge_duplicates
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share, shared_dof
 from bve_mj.geometry import unit
@@ -90,6 +91,9 @@ class Track:
         views: the views whose detections it holds.
         viewpoints: the camera positions of those views, those within
             :data:`SAME_VIEWPOINT_M` of an earlier one left out [m].
+        sensor_info: S, the information the declared sensor errors hold in its belief (the
+            calibration biases' prior, encoder noise: :mod:`bve_mj.estimation.sensor_share`),
+            None where none.
     """
 
     id: int
@@ -106,6 +110,7 @@ class Track:
     cameras: list[np.ndarray] = field(default_factory=list)
     views: set[int] = field(default_factory=set)
     viewpoints: list[np.ndarray] = field(default_factory=list)
+    sensor_info: np.ndarray | None = None
 
     @property
     def centre_m(self) -> np.ndarray:
@@ -233,6 +238,7 @@ class Tracker:
     def seed(self, belief: Belief, view: int) -> Track:
         """Start a confirmed track from a given belief (the target the episode was asked for)."""
         t = Track(self._next_id, belief, view, view, confirmed=True)
+        t.sensor_info = calibration_information(belief.dim, self.calibration_sigmas)
         self._next_id += 1
         self.tracks.append(t)
         return t
@@ -331,6 +337,7 @@ class Tracker:
             model = discounted(model, centre_share, radius_share)  # type: ignore[assignment]
         result, _ = mixture_update(self._update, t.belief, s.z, model, self.outliers)
         t.belief = result.belief
+        t.sensor_info = added(t.sensor_info, measurement_information(model, s.sensor_cov, result.belief.mean))
         t.hits += 1
         t.views.add(view)
         t.note_viewpoint(s.model.p_world_camera)
@@ -360,6 +367,10 @@ class Tracker:
         if rng > cfg.max_range_m or np.linalg.norm(p + along * ray / rng - self.zone_centre_m) > cfg.zone_m:
             return None
         t = Track(self._next_id, belief, view, view, confirmed=cfg.confirm_hits <= 1, views={view})
+        t.sensor_info = added(
+            calibration_information(belief.dim, self.calibration_sigmas),
+            measurement_information(s.model, s.sensor_cov, belief.mean),
+        )  # the detection is its first measurement (its belief is the prior's update by it)
         t.directions.append(unit(s.model.p_world_camera - belief.centre_m))
         t.cameras.append(np.asarray(s.model.p_world_camera, dtype=float).copy())
         t.note_viewpoint(s.model.p_world_camera)

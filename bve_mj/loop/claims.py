@@ -12,6 +12,7 @@ import numpy as np
 from bve_mj.estimation import Belief
 from bve_mj.estimation.claim_shape import GAUSSIAN, ClaimShape
 from bve_mj.estimation.noise import NoiseModel, Outline
+from bve_mj.estimation.sensor_share import nearest_psd
 
 __all__ = ["Claims", "shape_of"]
 
@@ -47,6 +48,9 @@ class Claims:
             claim's 99.9% region and the one the loop decides with; the claim itself is a
             Student-t of that mean whose covariance is the bound's over ``shape.bound_scale``
             (the errors' second moment: ``NoiseModel.moment_scale``). Gaussian by default.
+            Every scale fitted here is the detector's: the share of the filter's covariance
+            the declared sensor errors make (the calibration biases' prior, encoder noise) is
+            kept whole, only ever scaled up by the innovations (:meth:`sensor_part`).
         offset_of: when set, the centre's offset covariance from what the detector saw of
             the fruit in the views fused (one :class:`~bve_mj.estimation.noise.Outline` each,
             None where not known: :meth:`bve_mj.estimation.noise.NoiseModel.centre_offset_cov`,
@@ -102,24 +106,44 @@ class Claims:
         nu = self.innovation_prior_dof
         return (nu + sum(n for n, _ in innovations)) / (nu + sum(m for _, m in innovations))
 
+    def sensor_part(
+        self, sensor_cov: np.ndarray | None, innovations: Sequence[tuple[float, float]]
+    ) -> np.ndarray | None:
+        """What the bound holds of G, the declared sensor errors' share of the filter's
+        covariance (:func:`~bve_mj.estimation.sensor_share.sensor_share`): G · max(1, s²).
+        The fitted scales (κ², m, b) are the detector's and leave it whole; innovations wider
+        than the noise model says cannot tell whose error they are, so they widen it too,
+        while innovations that agree better do not shrink a bias no innovation can show."""
+        if sensor_cov is None:
+            return None
+        return np.asarray(sensor_cov, dtype=float) * max(1.0, self.scale(innovations))
+
     def claim(
         self,
         belief: Belief,
         innovations: Sequence[tuple[float, float]],
         refused_share: float = 0.0,
         outlines: Sequence[Outline | None] | None = None,
+        sensor_cov: np.ndarray | None = None,
     ) -> Belief:
         """The bound of the belief the episode claims (see ``shape``), from the filter's, its
         accepted innovations, the share of its views in which the detector refused the fruit
-        and, when given, what the detector saw of it in the views fused (``outlines``)."""
-        cov = np.array(belief.cov) * self.scale(innovations)
+        and, when given, what the detector saw of it in the views fused (``outlines``) and the
+        declared sensor errors' share of its covariance (``sensor_cov``, G: :func:`~bve_mj.
+        estimation.sensor_share.sensor_share`), which the bound holds as :meth:`sensor_part`."""
+        cov = np.array(belief.cov)
+        kept = self.sensor_part(sensor_cov, innovations)
+        if sensor_cov is not None:
+            cov = nearest_psd(cov - np.asarray(sensor_cov, dtype=float))
+        cov *= self.scale(innovations)
         if self.offset_of is not None and outlines is not None:
             cov[:3, :3] += self.offset_of(outlines)
         elif self.centre_offset_cov is not None:
             cov[:3, :3] += np.asarray(self.centre_offset_cov, dtype=float)
         if self.refusal_scale > 0.0:
             cov *= math.exp(self.refusal_scale * min(max(refused_share, 0.0), 1.0))
-        return Belief(belief.mean, cov * self.tail_scale)
+        cov *= self.tail_scale
+        return Belief(belief.mean, cov if kept is None else cov + kept)
 
 
 def shape_of(claims: Claims | None) -> ClaimShape:

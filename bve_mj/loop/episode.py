@@ -6,7 +6,7 @@ import dataclasses
 import itertools
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -14,6 +14,7 @@ from bve_mj.config import FilterConfig
 from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation import Belief, UpdateResult, filter_update, predict
 from bve_mj.estimation.prior_bound import PriorBound
+from bve_mj.estimation.sensor_share import sensor_information, sensor_share
 from bve_mj.estimation.view_correlation import ViewCorrelation, discounted, new_view_share, shared_dof
 from bve_mj.geometry import unit
 from bve_mj.loop.claims import Claims, shape_of
@@ -217,9 +218,15 @@ class EpisodeLoop:
             if claims is not None:
                 outlines = [o.outline for o in others]
                 refused = sum(not v.measured for v in self.views) / len(self.views)  # as the last claim
-                belief = claims.claim(belief, self._innovations, refused, outlines)
+                sensor = self._sensor_share(belief, others)
+                belief = claims.claim(belief, self._innovations, refused, outlines, sensor)
             out.append(belief)
         return out
+
+    def _sensor_share(self, belief: Belief, fused: Sequence[Observation]) -> np.ndarray | None:
+        """The declared sensor errors' share of ``belief`` after the prior and ``fused``."""
+        measured = [(o.model, o.sensor_cov) for o in fused]
+        return sensor_share(belief.cov, sensor_information(self.prior, measured, belief.mean))
 
     def _fuse(
         self, i: int, status: PlanStatus | None, feasible: bool, plan_s: float, events: list[Event]
@@ -277,16 +284,19 @@ class EpisodeLoop:
             innovations[:] = innovations[-1:]
             fused[:] = fused[-1:]
             self._fused_at[:] = self._fused_at[-1:]
+        sensor = None
         if self.claims is None:
             claimed = belief
         else:  # the share of the views so far, this one included, in which nothing was measured
             refused = (sum(not v.measured for v in views) + (not measured)) / (len(views) + 1)
             outlines = [o.outline for o in self._accepted]
-            claimed = self.claims.claim(belief, innovations, refused, outlines)
+            share = self._sensor_share(belief, self._accepted)
+            claimed = self.claims.claim(belief, innovations, refused, outlines, share)
+            sensor = self.claims.sensor_part(share, innovations)
         views.append(
             ViewRecord(
                 i, world.p_world_camera, status, feasible, plan_s, measured, accepted, nis, claimed, info,
-                tuple(events), None if claimed is belief else belief,
+                tuple(events), None if claimed is belief else belief, sensor,
             )
         )  # fmt: skip
         if not accepted and isinstance(planner, LearnsFromFailedViews):

@@ -32,11 +32,11 @@ from bve_mj.errors import BveError, EstimationError
 from bve_mj.estimation.assignment import Sighting
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import BearingSizeModel
-from bve_mj.estimation.tracks import Track, Tracker
+from bve_mj.estimation.tracks import Tracker
 from bve_mj.estimation.unmeasured import explained_in_view, settled, too_small, unexplained
 from bve_mj.loop.claims import Claims, shape_of
 from bve_mj.loop.events import Event
-from bve_mj.loop.fruit_records import FruitsResult, FruitState, FruitsView
+from bve_mj.loop.fruit_records import FruitsResult, FruitState, FruitsView, claimed
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.planning.every_fruit import (
     EXPLORE,
@@ -80,24 +80,6 @@ class SurveyRound:
     explored: list[np.ndarray] = field(default_factory=list)
     stall_views: int = 0
     visited: frozenset[int] = frozenset()
-
-
-def claimed(track: Track, claims: Claims | None, stop_sigma_m: float, converge_after: int) -> FruitState:
-    """The state a track claims: its belief with the claims, and whether it is localised."""
-    belief = track.belief
-    if claims is not None:
-        belief = claims.claim(belief, track.innovations, track.missed_share)
-    localised = track.confirmed and track.hits >= converge_after and belief.sigma_max_m <= stop_sigma_m
-    return FruitState(
-        track.id,
-        belief,
-        track.confirmed,
-        track.hits,
-        track.misses,
-        track.expected,
-        bool(localised),
-        None if belief is track.belief else track.belief,
-    )
 
 
 def explored_deg(directions: list[np.ndarray]) -> float:

@@ -11,13 +11,15 @@ import numpy as np
 
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.claim_shape import GAUSSIAN, ClaimShape
-from bve_mj.estimation.tracks import ViewTracking
+from bve_mj.estimation.sensor_share import sensor_share
+from bve_mj.estimation.tracks import Track, ViewTracking
+from bve_mj.loop.claims import Claims
 from bve_mj.loop.events import Event
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.planning.plan import PlanStatus
 from bve_mj.sim.scene_model import Fruit
 
-__all__ = ["FruitMatch", "FruitState", "FruitsResult", "FruitsView"]
+__all__ = ["FruitMatch", "FruitState", "FruitsResult", "FruitsView", "claimed"]
 
 
 @dataclass(frozen=True)
@@ -30,6 +32,8 @@ class FruitState:
         confirmed, hits, misses, expected: see :class:`~bve_mj.estimation.tracks.Track`.
         localised: claimed σmax ≤ the stop threshold after enough detections.
         filter_belief: the track's own belief where the claim differs from it, else None.
+        sensor_cov: the share of ``belief``'s covariance the declared sensor errors make,
+            which the claim keeps whole (:class:`~bve_mj.loop.records.ViewRecord`), else None.
     """
 
     id: int
@@ -40,6 +44,7 @@ class FruitState:
     expected: int
     localised: bool
     filter_belief: Belief | None = None
+    sensor_cov: np.ndarray | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The track in an episode's ``--json``: estimate, covariance, radius, state."""
@@ -55,6 +60,27 @@ class FruitState:
             "misses": self.misses,
             "localised": self.localised,
         }
+
+
+def claimed(track: Track, claims: Claims | None, stop_sigma_m: float, converge_after: int) -> FruitState:
+    """The state a track claims: its belief with the claims, and whether it is localised."""
+    belief, sensor = track.belief, None
+    if claims is not None:
+        share = sensor_share(belief.cov, track.sensor_info)
+        belief = claims.claim(belief, track.innovations, track.missed_share, sensor_cov=share)
+        sensor = claims.sensor_part(share, track.innovations)
+    localised = track.confirmed and track.hits >= converge_after and belief.sigma_max_m <= stop_sigma_m
+    return FruitState(
+        track.id,
+        belief,
+        track.confirmed,
+        track.hits,
+        track.misses,
+        track.expected,
+        bool(localised),
+        None if belief is track.belief else track.belief,
+        sensor,
+    )
 
 
 @dataclass(frozen=True)
@@ -115,7 +141,7 @@ class FruitMatch:
     @property
     def claim(self) -> Belief | None:
         """What the track claims: its bound's mean, the covariance of the claim's shape."""
-        return None if self.track is None else self.shape.claim(self.track.belief)
+        return None if self.track is None else self.shape.claim(self.track.belief, self.track.sensor_cov)
 
     @property
     def error_mm(self) -> float:

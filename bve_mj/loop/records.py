@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,7 +14,7 @@ from bve_mj.loop.events import Event, EventKind
 from bve_mj.loop.outcomes import Outcome
 from bve_mj.planning.plan import PlanStatus
 
-__all__ = ["EpisodeResult", "ViewRecord"]
+__all__ = ["EpisodeResult", "ViewRecord", "since_reset"]
 
 
 @dataclass(frozen=True)
@@ -30,6 +31,10 @@ class ViewRecord:
     tail scales), else None. Where the claim has a heavy-tailed shape (:class:`~bve_mj.
     estimation.claim_shape.ClaimShape`, :attr:`EpisodeResult.shape`) ``belief`` is its
     bound, the Gaussian the loop decides with; :meth:`EpisodeResult.claim` is the claim.
+    ``sensor_cov``: the share of ``belief``'s covariance the declared sensor errors make (the
+    calibration biases' prior, encoder noise: :mod:`bve_mj.estimation.sensor_share`), as the
+    bound holds it (:meth:`~bve_mj.loop.claims.Claims.sensor_part`), which the claim keeps
+    whole; None where there is none.
     """
 
     iteration: int
@@ -44,10 +49,16 @@ class ViewRecord:
     world: dict[str, object] | None = None
     events: tuple[Event, ...] = ()
     filter_belief: Belief | None = None
+    sensor_cov: np.ndarray | None = None
 
     def has(self, kind: EventKind) -> bool:
         """Whether an event of this kind happened at this view."""
         return any(e.kind == kind for e in self.events)
+
+
+def since_reset(views: Sequence[ViewRecord]) -> Sequence[ViewRecord]:
+    """The views since the last belief reset, the reset's own view first (all without one)."""
+    return views[max((k for k, v in enumerate(views) if v.has("belief_reset")), default=0) :]
 
 
 @dataclass(frozen=True)
@@ -76,7 +87,7 @@ class EpisodeResult:
 
     def claim(self, view: ViewRecord) -> Belief:
         """What ``view`` claims: its bound's mean, with the covariance of the claim's shape."""
-        return self.shape.claim(view.belief)
+        return self.shape.claim(view.belief, view.sensor_cov)
 
     @property
     def final_filter(self) -> Belief:

@@ -13,7 +13,7 @@ from bve_mj.estimation import Belief
 from bve_mj.estimation.metrics import chi2_quantile
 from bve_mj.geometry import unit
 from bve_mj.loop.outcomes import Outcome
-from bve_mj.loop.records import ViewRecord
+from bve_mj.loop.records import ViewRecord, since_reset
 
 if TYPE_CHECKING:
     from bve_mj.config import EpisodeConfig
@@ -166,8 +166,7 @@ class StopRules:
         unset)."""
         if self.agree_nis is None:
             return None
-        start = max((k for k, v in enumerate(views) if v.has("belief_reset")), default=0)
-        fused = [v for v in views[start:] if v.accepted][1:]
+        fused = [v for v in since_reset(views) if v.accepted][1:]
         disputes = [k for k, v in enumerate(fused) if v.nis > self.agree_nis]
         if not disputes:
             return None
@@ -182,8 +181,7 @@ class StopRules:
 
 def accepted_since_reset(views: Sequence[ViewRecord]) -> int:
     """Accepted measurements since the last belief reset (the reset's own view counts)."""
-    start = max((k for k, v in enumerate(views) if v.has("belief_reset")), default=0)
-    return sum(v.accepted for v in views[start:])
+    return sum(v.accepted for v in since_reset(views))
 
 
 def _planned_move(view: ViewRecord) -> bool:

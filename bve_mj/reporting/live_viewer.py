@@ -98,7 +98,9 @@ class LiveViewer:
             self._sync()
 
     def on_view(self, record: ViewRecord) -> None:
-        self._belief = self._shape.claim(record.belief)  # what the view claims: its belief is the bound
+        self._belief = self._shape.claim(
+            record.belief, record.sensor_cov
+        )  # what the view claims: its belief is the bound
         self._views.append(np.asarray(record.p_world_camera, dtype=float).copy())
         self._draw()
         self._sync()

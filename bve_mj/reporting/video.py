@@ -76,7 +76,9 @@ class EpisodeRecorder(OutsideVideo):
     def on_view(self, record: ViewRecord) -> None:
         if self._writer is None:
             return
-        claim = self._shape.claim(record.belief)  # what the view claims (its belief is the bound)
+        claim = self._shape.claim(
+            record.belief, record.sensor_cov
+        )  # what the view claims (its belief is the bound)
         self._belief = claim.position
         self._view = record.iteration
         here = self._mark_view()

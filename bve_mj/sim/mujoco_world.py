@@ -277,14 +277,16 @@ class MujocoWorld:
         if self.noise is not None:  # the radius in the state: what the detector measures
             z, cov = measure(det, self.noise, s.fruit.shape_index, self.intrinsics.focal_px)
             # encoder noise turns the camera (about 6 joints' errors): a white bearing error
-            cov[:2, :2] += np.eye(2) * (2.5 * s.sensor.encoder_noise_rad) ** 2
+            enc = np.diag([(2.5 * s.sensor.encoder_noise_rad) ** 2] * 2 + [0.0])
+            cov += enc
             self.last.measurement = (z, cov)
             # what the built-in detector saw (a detection with its own covariance is another
             # detector's: the claim keeps the noise model's bound over all fruits for it)
             own = getattr(det, "measurement_cov", None) is not None
             outline = None if own else Outline(det.neighbour_share)
             if s.measurement.kind in ("camera", "auto"):
-                return Observation(z, BearingSizeModel(p, R, cov), outline)
+                sensor = enc if s.sensor.encoder_noise_rad > 0.0 else None
+                return Observation(z, BearingSizeModel(p, R, cov), outline, sensor)
             return Observation(z[2:], SizeModel(p, float(cov[2, 2])), outline)
         if s.measurement.kind in ("camera", "auto"):  # auto: the camera here
             return Observation(det.p_camera, CameraModel(p, R, det.cov_camera))
@@ -312,8 +314,8 @@ class MujocoWorld:
         sightings = []
         for det in found.detections:
             z, cov = measure(det, self.noise, s.fruit.shape_index, self.intrinsics.focal_px)
-            cov[:2, :2] += np.eye(2) * (2.5 * s.sensor.encoder_noise_rad) ** 2
-            sightings.append(Sighting(z, BearingSizeModel(p, R, cov)))
+            enc = np.diag([(2.5 * s.sensor.encoder_noise_rad) ** 2] * 2 + [0.0])  # as in observe
+            sightings.append(Sighting(z, BearingSizeModel(p, R, cov + enc), enc if enc.any() else None))
         self._unmeasured = []
         for r in found.refused:
             if r.partial and r.centre_px is not None and r.radius_px is not None:

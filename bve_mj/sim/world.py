@@ -45,11 +45,13 @@ class Scenario:
 class Observation:
     """A measurement z of ``model`` taken from the camera's current pose; ``outline``: what
     the detector saw of the fruit's outline, where the world knows (a detector's, not a
-    synthetic world's)."""
+    synthetic world's); ``sensor_cov``: the part of the model's noise covariance the declared
+    sensor errors make (encoder noise), None where none (:mod:`bve_mj.estimation.sensor_share`)."""
 
     z: np.ndarray
     model: MeasurementModel
     outline: Outline | None = None
+    sensor_cov: np.ndarray | None = None
 
 
 class World(Protocol):
