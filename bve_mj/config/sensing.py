@@ -97,8 +97,25 @@ class FruitPrior:
         ),
     )
 
+    tilt_sigma_deg: float = field(
+        default=4.0,
+        metadata=_why(
+            "the fruit's axis leans from the vertical on its peduncle by a few degrees: the "
+            "detector's spheroid fit estimates the lean across the line of sight, held to 0 with "
+            "this sigma (the simulated crop leans 0-8 deg: 3.3 deg rms per direction); 0 = upright",
+            "deg",
+        ),
+    )
+
     def __post_init__(self) -> None:
         _positive("fruit", "radius_m", self.radius_m)
+        if not (
+            isinstance(self.tilt_sigma_deg, (int, float))
+            and not isinstance(self.tilt_sigma_deg, bool)
+            and math.isfinite(self.tilt_sigma_deg)
+            and 0.0 <= self.tilt_sigma_deg <= 30.0
+        ):
+            raise ConfigError("fruit.tilt_sigma_deg", self.tilt_sigma_deg, "a number in [0, 30]")
         if not (isinstance(self.shape_index, (int, float)) and 0.4 <= self.shape_index <= 2.5):
             raise ConfigError("fruit.shape_index", self.shape_index, "a number in [0.4, 2.5]")
         for name in ("radius_spread_rel", "shape_spread_rel"):
@@ -121,6 +138,11 @@ class FruitPrior:
             shape_spread_rel=min(0.5 * max(abs(1.0 - s_lo), abs(1.0 - s_hi)), 0.99),
             shape_index=min(max(0.5 * (s_lo + s_hi), 0.4), 2.5),
         )
+
+    @property
+    def tilt_sigma_rad(self) -> float:
+        """σ of the angle the fruit's axis leans by in any one direction [rad]."""
+        return math.radians(self.tilt_sigma_deg)
 
     @property
     def size_spread_rel(self) -> float:

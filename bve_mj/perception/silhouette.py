@@ -82,7 +82,8 @@ def _fit_silhouette(
 def _refine_spheroid(
     fit: _Fit, up: np.ndarray, fruit: FruitPrior, cfg: DetectorConfig, f: float, shape_px: float
 ) -> SpheroidFit | None:
-    """The spheroid (axis ``up``) through the outline the circle fit saw, trimmed again by its
+    """The spheroid (axis near ``up``, leaning as the fruit's prior allows:
+    ``FruitPrior.tilt_sigma_deg``) through the outline the circle fit saw, trimmed again by its
     own residuals: the top and bottom of a flattened fruit, which lie inside the circle
     through its equator, are its outline again, not occluder edges. None when it fails, or
     strays from the circle by more than half the apparent radius (another fruit's outline) or
@@ -99,10 +100,13 @@ def _refine_spheroid(
     for _ in range(2):
         if use.sum() < cfg.min_boundary_points:
             return None
-        sph = fit_spheroid(fit.rays[use], up, fit.axis, fit.alpha, fruit.shape_index, prior_log, 1.0 / f)
+        sph = fit_spheroid(
+            fit.rays[use], up, fit.axis, fit.alpha, fruit.shape_index, prior_log, 1.0 / f,
+            fruit.tilt_sigma_rad,
+        )  # fmt: skip
         if sph is None:
             return None
-        r_all = f * grazing_residuals(sph.p, sph.shape_index, up, fit.rays)
+        r_all = f * grazing_residuals(sph.p, sph.shape_index, sph.up, fit.rays)
         new_use = _trim_corners((r_all < cfg.outlier_px) & (r_all > -2.0 * cfg.outlier_px), margin=3)
         if np.array_equal(new_use, use):
             break

@@ -5,7 +5,19 @@ a plum 20-40% taller. Its silhouette is then not a circle but (nearly) an ellips
 circle fitted through its widest parts with the rest trimmed as "occluded" has its centre
 off by the difference of the semi-axes (a 28 mm fruit of shape index 0.9: ~3 mm, always the
 same way). The fruit hangs with its axis near the vertical (tilted by a few degrees), so the
-axis is known in the camera frame, and a spheroid with that axis is fitted instead.
+axis is nearly known in the camera frame, and a spheroid about it is fitted instead.
+
+The axis is not the vertical, though: a fruit leans on its peduncle by a few degrees, and an
+upright spheroid fitted to a leaning flattened fruit's outline is off by a share of the
+difference of its semi-axes (a beefsteak, k ≈ 0.7, 0.25 m away, leaning 8° across the view:
+2.7 px). The lean across the line of sight turns the outline in the image, and the outline
+shows it; so that lean is fitted, one small angle t along n = b₀ × u₀ / |…| (b₀ the circle
+fit's bearing, u₀ the vertical): u = (u₀ + t n)/|…|, held to 0 with the fruit type's σ
+(``tilt_sigma_rad``). The lean along the line of sight only changes the outline's aspect,
+which the shape index takes, and is left out (fitted too, it let the outline's correlated
+distortions of a tenth of a pixel pull the axis 25° in views from above: the outline's
+hundreds of points outweigh any prior); so is the whole fit's lean where the view is
+within 17° of the axis (|b₀ × u₀| < 0.3: the outline is the equator, whatever the lean).
 
 Model, in the camera frame, lengths in units of the equatorial radius a: centre p, axis u
 (unit), shape index k = polar / equatorial semi-axis; the surface is (x - p)ᵀ A (x - p) = 1
@@ -25,11 +37,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
 
-__all__ = ["SpheroidFit", "fit_spheroid", "grazing_jacobian", "grazing_residuals"]
+_MIN_ACROSS = 0.3
+
+"""|b₀ × u₀| below which the lean is not fitted (the view within 17° of the axis)."""
+
+__all__ = [
+    "SpheroidFit", "fit_spheroid", "grazing_axis_jacobian", "grazing_jacobian", "grazing_residuals",
+    "tilted_axis",
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -42,7 +62,10 @@ class SpheroidFit:
         shape_index: k, polar / equatorial semi-axis.
         resid_rad: inside-positive angular residuals of every ray given, (N,).
         p: the centre in units of the equatorial radius, (3,).
-        jac_rad: d(residual)/d(p, ln k) of the rays fitted [rad], (M, 4).
+        jac_rad: d(residual)/d(p, ln k) of the rays fitted [rad], (M, 4); with the axis
+            lean fitted, d(residual)/d(p, ln k, t), (M, 5).
+        up: the fruit's axis fitted, unit (3,) (the vertical given, where it was not fitted).
+        tilt_sigma_rad: the σ the lean was held to (0: the axis was not fitted).
     """
 
     axis: np.ndarray
@@ -51,13 +74,18 @@ class SpheroidFit:
     resid_rad: np.ndarray
     p: np.ndarray
     jac_rad: np.ndarray
+    up: np.ndarray
+    tilt_sigma_rad: float = 0.0
 
     def sigmas(self, point_var_rad2: float, weight: float, shape_sigma_log: float) -> tuple[float, float]:
         """1σ of the bearing (across it, the worse direction) and of α [rad] when each fitted
         ray's residual has variance ``point_var_rad2`` and counts ``weight`` (correlated
-        points count less than one each); the shape prior adds its information."""
+        points count less than one each); the shape's and the tilt's priors add their
+        information (what the outline leaves of the tilt's play is in the centre's σ)."""
         info = weight * self.jac_rad.T @ self.jac_rad / point_var_rad2
         info[3, 3] += 1.0 / max(shape_sigma_log, 1e-3) ** 2
+        if info.shape[0] > 4:
+            info[4:, 4:] += np.eye(info.shape[0] - 4) / self.tilt_sigma_rad**2
         try:
             C = np.linalg.inv(info)[:3, :3]
         except np.linalg.LinAlgError:
@@ -74,43 +102,75 @@ class SpheroidFit:
         return math.sqrt(max(float(lateral[-1]), 0.0)), math.sqrt(max(float(g @ C @ g), 0.0))
 
 
-def grazing_jacobian(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray) -> np.ndarray:
-    """∂(residual)/∂(p, ln k) of :func:`grazing_residuals`, (N, 4), in the Gauss-Newton
-    sense: dg / |∇⊥g| (the derivative of the Sampson scale, which multiplies g, vanishes on
-    the silhouette and is left out). With q = Ap, c = pᵀAp - 1, β = bᵀq, γ = bᵀAb:
-    ∂g/∂p = 2β Ab - 2γ q; with dA/d(ln k) = -(2/k²) u uᵀ, u_b = uᵀb, u_p = uᵀp:
-    ∂g/∂ln k = -(2/k²)(2β u_b u_p - c u_b² - γ u_p²)."""
-    k2 = shape_index**2
-    A = np.eye(3) + (1.0 / k2 - 1.0) * np.outer(up, up)
+class _Grazing(NamedTuple):
+    """The terms every function of the grazing condition shares, for rays (N, 3): with
+    A = I + (1/k² - 1) u uᵀ, q = Ap, c = pᵀAp - 1, β = bᵀq, γ = bᵀAb, g = β² - γc and
+    ``norm`` = |∇⊥g| (the gradient across each ray, the Sampson scale)."""
+
+    A: np.ndarray
+    q: np.ndarray
+    c: float
+    beta: np.ndarray
+    Ab: np.ndarray
+    gamma: np.ndarray
+    norm: np.ndarray
+
+
+def _grazing(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray) -> _Grazing:
+    A = np.eye(3) + (1.0 / shape_index**2 - 1.0) * np.outer(up, up)
     q = A @ p
     c = float(p @ q) - 1.0
     beta = rays @ q
-    Ab = rays @ A
+    Ab = rays @ A  # A symmetric
     gamma = np.einsum("ij,ij->i", rays, Ab)
     grad = 2.0 * (beta[:, None] * q[None, :] - c * Ab)
-    grad -= np.einsum("ij,ij->i", grad, rays)[:, None] * rays
-    norm = np.maximum(np.linalg.norm(grad, axis=1), 1e-12)
-    ub, upp = rays @ up, float(up @ p)
-    J = np.empty((len(rays), 4))
-    J[:, :3] = 2.0 * (beta[:, None] * Ab - gamma[:, None] * q[None, :])
-    J[:, 3] = -(2.0 / k2) * (2.0 * beta * ub * upp - c * ub**2 - gamma * upp**2)
-    return J / norm[:, None]
+    grad -= np.einsum("ij,ij->i", grad, rays)[:, None] * rays  # across the ray only
+    return _Grazing(A, q, c, beta, Ab, gamma, np.maximum(np.linalg.norm(grad, axis=1), 1e-12))
 
 
 def grazing_residuals(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray) -> np.ndarray:
     """Angular distance [rad] of unit ``rays`` (N, 3) from the silhouette of the spheroid
     centred at ``p`` (equatorial radius 1) with axis ``up`` and ``shape_index``; positive
     inside the silhouette."""
-    A = np.eye(3) + (1.0 / shape_index**2 - 1.0) * np.outer(up, up)
-    Ap = A @ p
-    c = float(p @ Ap) - 1.0
-    bAp = rays @ Ap
-    Ab = rays @ A  # A symmetric
-    bAb = np.einsum("ij,ij->i", rays, Ab)
-    g = bAp**2 - bAb * c
-    grad = 2.0 * (bAp[:, None] * Ap[None, :] - c * Ab)
-    grad -= np.einsum("ij,ij->i", grad, rays)[:, None] * rays  # across the ray only
-    return g / np.maximum(np.linalg.norm(grad, axis=1), 1e-12)
+    t = _grazing(p, shape_index, up, rays)
+    return (t.beta**2 - t.gamma * t.c) / t.norm
+
+
+def grazing_jacobian(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """∂(residual)/∂(p, ln k) of :func:`grazing_residuals`, (N, 4), in the Gauss-Newton
+    sense: dg / |∇⊥g| (the derivative of the Sampson scale, which multiplies g, vanishes on
+    the silhouette and is left out). With q = Ap, c = pᵀAp - 1, β = bᵀq, γ = bᵀAb:
+    ∂g/∂p = 2β Ab - 2γ q; with dA/d(ln k) = -(2/k²) u uᵀ, u_b = uᵀb, u_p = uᵀp:
+    ∂g/∂ln k = -(2/k²)(2β u_b u_p - c u_b² - γ u_p²)."""
+    t = _grazing(p, shape_index, up, rays)
+    ub, upp = rays @ up, float(up @ p)
+    J = np.empty((len(rays), 4))
+    J[:, :3] = 2.0 * (t.beta[:, None] * t.Ab - t.gamma[:, None] * t.q[None, :])
+    J[:, 3] = -(2.0 / shape_index**2) * (2.0 * t.beta * ub * upp - t.c * ub**2 - t.gamma * upp**2)
+    return J / t.norm[:, None]
+
+
+def grazing_axis_jacobian(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """∂(residual)/∂u of :func:`grazing_residuals` for the axis ``up`` taken as a free vector
+    (N, 3), in the Gauss-Newton sense of :func:`grazing_jacobian`. With κ = 1/k² - 1, dA =
+    κ(du uᵀ + u duᵀ): ∂g/∂u = κ(2β(u_p b + u_b p) - 2c u_b b - 2γ u_p p)."""
+    t = _grazing(p, shape_index, up, rays)
+    ub, upp = rays @ up, float(up @ p)
+    J = (1.0 / shape_index**2 - 1.0) * (
+        2.0 * t.beta[:, None] * (upp * rays + ub[:, None] * p[None, :])
+        - 2.0 * t.c * ub[:, None] * rays
+        - 2.0 * (t.gamma * upp)[:, None] * p[None, :]
+    )
+    return J / t.norm[:, None]
+
+
+def tilted_axis(up: np.ndarray, across: np.ndarray, tilt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The axis u (3,) tilted from the unit ``up`` by the small angles ``tilt`` (m,) along the
+    unit directions ``across`` (3, m) (each across ``up``), and ∂u/∂tilt (3, m)."""
+    v = up + across @ tilt
+    n = float(np.linalg.norm(v))
+    u = v / n
+    return u, (across - np.outer(u, u @ across)) / n
 
 
 def fit_spheroid(
@@ -121,24 +181,46 @@ def fit_spheroid(
     shape_index0: float,
     shape_sigma_log: float,
     scale_rad: float,
+    tilt_sigma_rad: float = 0.0,
 ) -> SpheroidFit | None:
     """Least-squares spheroid silhouette through ``rays`` (N, 3), starting from the sphere
     (``axis0``, ``alpha0``) with the prior shape index; a robust loss (soft L1 at
     ``scale_rad``, about a pixel) lets a few stray points pass, and the log shape index is
-    held to its prior with σ ``shape_sigma_log`` (a view along the axis cannot see it).
-    None when the fit fails or ends at an absurd shape (k outside [0.4, 2.5])."""
+    held to its prior with σ ``shape_sigma_log`` (a view along the axis cannot see it). With
+    ``tilt_sigma_rad`` > 0 the axis is fitted too, starting from ``up``, each tilt angle held
+    to 0 with that σ; otherwise the axis is ``up``. None when the fit fails or ends at an
+    absurd shape (k outside [0.4, 2.5])."""
     up = np.asarray(up, dtype=float) / float(np.linalg.norm(up))
+    across = np.cross(np.asarray(axis0, dtype=float), up)
+    tilted = tilt_sigma_rad > 0.0 and float(np.linalg.norm(across)) >= _MIN_ACROSS
+    across = (across / float(np.linalg.norm(across)))[:, None] if tilted else np.zeros((3, 0))
     x0 = np.concatenate([np.asarray(axis0, dtype=float) / math.sin(alpha0), [math.log(shape_index0)]])
+    if tilted:
+        x0 = np.append(x0, 0.0)
     prior_w = 1.0 / max(shape_sigma_log, 1e-3)
+    tilt_w = 1.0 / tilt_sigma_rad if tilted else 0.0
+    prior_rows = np.zeros((2 if tilted else 1, len(x0)))
+    prior_rows[0, 3] = prior_w
+    if tilted:
+        prior_rows[1, 4] = tilt_w
+
+    def axis_of(x: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        return tilted_axis(up, across, x[4:]) if tilted else (up, None)
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        r = grazing_residuals(x[:3], math.exp(x[3]), up, rays) / scale_rad
-        return np.append(r, prior_w * (x[3] - math.log(shape_index0)))
-
-    prior_row = np.array([[0.0, 0.0, 0.0, prior_w]])
+        u, _ = axis_of(x)
+        r = grazing_residuals(x[:3], math.exp(x[3]), u, rays) / scale_rad
+        prior = [prior_w * (x[3] - math.log(shape_index0))]
+        if tilted:
+            prior.append(tilt_w * x[4])
+        return np.append(r, prior)
 
     def jacobian(x: np.ndarray) -> np.ndarray:
-        return np.vstack([grazing_jacobian(x[:3], math.exp(x[3]), up, rays) / scale_rad, prior_row])
+        u, du = axis_of(x)
+        J = grazing_jacobian(x[:3], math.exp(x[3]), u, rays)
+        if du is not None:
+            J = np.hstack([J, grazing_axis_jacobian(x[:3], math.exp(x[3]), u, rays) @ du])
+        return np.vstack([J / scale_rad, prior_rows])
 
     try:
         # a fit that runs away (rays no spheroid near the start explains: a plum cut by its
@@ -153,6 +235,8 @@ def fit_spheroid(
     n = float(np.linalg.norm(p))
     if not (np.all(np.isfinite(sol.x)) and n > 1.0 and 0.4 <= k <= 2.5 and p[0] > 0.0):
         return None
+    u, _ = axis_of(sol.x)
     return SpheroidFit(
-        p / n, math.asin(1.0 / n), k, grazing_residuals(p, k, up, rays), p.copy(), sol.jac[:-1] * scale_rad
-    )
+        p / n, math.asin(1.0 / n), k, grazing_residuals(p, k, u, rays), p.copy(),
+        sol.jac[: len(rays)] * scale_rad, u, float(tilt_sigma_rad) if tilted else 0.0,
+    )  # fmt: skip
