@@ -41,6 +41,18 @@ def test_the_greenhouse_preset_is_what_the_closed_loop_used_before():
     assert Settings().for_world("mujoco") == g
 
 
+def test_a_lean_sigma_set_alone_keeps_the_scene_s_fruit_type():
+    """``[fruit] tilt_sigma_deg`` alone changes the detector's lean prior, not the fruit type's
+    size and shape prior; any size or shape set replaces the type's prior, as before."""
+    from bve_mj.config import SceneConfig
+
+    scene = SceneConfig(fruit_type="beefsteak")
+    upright = Settings(scene=scene, fruit=FruitPrior(tilt_sigma_deg=0.0)).for_world("mujoco")
+    assert upright.fruit == dataclasses.replace(FruitPrior.for_scene(scene), tilt_sigma_deg=0.0)
+    sized = Settings(scene=scene, fruit=FruitPrior(radius_m=0.05, tilt_sigma_deg=0.0)).for_world("mujoco")
+    assert sized.fruit == FruitPrior(radius_m=0.05, tilt_sigma_deg=0.0)
+
+
 def test_the_paper_preset_is_the_synthetic_protocol():
     p = Settings.paper()
     assert (p.constraints.band_distance_m, p.constraints.band_tolerance_m, p.constraints.step_m) == (

@@ -165,8 +165,13 @@ class Settings:
             out = dataclasses.replace(
                 out, planner=dataclasses.replace(self.planner, upright_weight=p.upright_weight)
             )
-        if world == "mujoco" and self.fruit == FruitPrior():
-            out = dataclasses.replace(out, fruit=FruitPrior.for_scene(self.scene))
+        # the fruit type's prior unless a size or shape was set; the lean's σ is not the type's
+        set_lean = dataclasses.replace(FruitPrior(), tilt_sigma_deg=self.fruit.tilt_sigma_deg)
+        if world == "mujoco" and self.fruit == set_lean:
+            typed = FruitPrior.for_scene(self.scene)
+            out = dataclasses.replace(
+                out, fruit=dataclasses.replace(typed, tilt_sigma_deg=set_lean.tilt_sigma_deg)
+            )
         return out
 
     @property
