@@ -107,7 +107,6 @@ class _Grazing(NamedTuple):
     A = I + (1/k² - 1) u uᵀ, q = Ap, c = pᵀAp - 1, β = bᵀq, γ = bᵀAb, g = β² - γc and
     ``norm`` = |∇⊥g| (the gradient across each ray, the Sampson scale)."""
 
-    A: np.ndarray
     q: np.ndarray
     c: float
     beta: np.ndarray
@@ -125,7 +124,7 @@ def _grazing(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray
     gamma = np.einsum("ij,ij->i", rays, Ab)
     grad = 2.0 * (beta[:, None] * q[None, :] - c * Ab)
     grad -= np.einsum("ij,ij->i", grad, rays)[:, None] * rays  # across the ray only
-    return _Grazing(A, q, c, beta, Ab, gamma, np.maximum(np.linalg.norm(grad, axis=1), 1e-12))
+    return _Grazing(q, c, beta, Ab, gamma, np.maximum(np.linalg.norm(grad, axis=1), 1e-12))
 
 
 def grazing_residuals(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray) -> np.ndarray:
@@ -142,26 +141,36 @@ def grazing_jacobian(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np
     the silhouette and is left out). With q = Ap, c = pᵀAp - 1, β = bᵀq, γ = bᵀAb:
     ∂g/∂p = 2β Ab - 2γ q; with dA/d(ln k) = -(2/k²) u uᵀ, u_b = uᵀb, u_p = uᵀp:
     ∂g/∂ln k = -(2/k²)(2β u_b u_p - c u_b² - γ u_p²)."""
-    t = _grazing(p, shape_index, up, rays)
-    ub, upp = rays @ up, float(up @ p)
-    J = np.empty((len(rays), 4))
-    J[:, :3] = 2.0 * (t.beta[:, None] * t.Ab - t.gamma[:, None] * t.q[None, :])
-    J[:, 3] = -(2.0 / shape_index**2) * (2.0 * t.beta * ub * upp - t.c * ub**2 - t.gamma * upp**2)
-    return J / t.norm[:, None]
+    return _jacobians(p, shape_index, up, rays, axis=False)[0]
 
 
 def grazing_axis_jacobian(p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray) -> np.ndarray:
     """∂(residual)/∂u of :func:`grazing_residuals` for the axis ``up`` taken as a free vector
     (N, 3), in the Gauss-Newton sense of :func:`grazing_jacobian`. With κ = 1/k² - 1, dA =
     κ(du uᵀ + u duᵀ): ∂g/∂u = κ(2β(u_p b + u_b p) - 2c u_b b - 2γ u_p p)."""
+    J_axis = _jacobians(p, shape_index, up, rays, axis=True)[1]
+    assert J_axis is not None
+    return J_axis
+
+
+def _jacobians(
+    p: np.ndarray, shape_index: float, up: np.ndarray, rays: np.ndarray, *, axis: bool
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`grazing_jacobian` and, with ``axis``, :func:`grazing_axis_jacobian`, from one set
+    of the grazing terms (the fit asks for both at every step)."""
     t = _grazing(p, shape_index, up, rays)
     ub, upp = rays @ up, float(up @ p)
-    J = (1.0 / shape_index**2 - 1.0) * (
+    J = np.empty((len(rays), 4))
+    J[:, :3] = 2.0 * (t.beta[:, None] * t.Ab - t.gamma[:, None] * t.q[None, :])
+    J[:, 3] = -(2.0 / shape_index**2) * (2.0 * t.beta * ub * upp - t.c * ub**2 - t.gamma * upp**2)
+    if not axis:
+        return J / t.norm[:, None], None
+    J_axis = (1.0 / shape_index**2 - 1.0) * (
         2.0 * t.beta[:, None] * (upp * rays + ub[:, None] * p[None, :])
         - 2.0 * t.c * ub[:, None] * rays
         - 2.0 * (t.gamma * upp)[:, None] * p[None, :]
     )
-    return J / t.norm[:, None]
+    return J / t.norm[:, None], J_axis / t.norm[:, None]
 
 
 def tilted_axis(up: np.ndarray, across: np.ndarray, tilt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -187,8 +196,9 @@ def fit_spheroid(
     (``axis0``, ``alpha0``) with the prior shape index; a robust loss (soft L1 at
     ``scale_rad``, about a pixel) lets a few stray points pass, and the log shape index is
     held to its prior with σ ``shape_sigma_log`` (a view along the axis cannot see it). With
-    ``tilt_sigma_rad`` > 0 the axis is fitted too, starting from ``up``, each tilt angle held
-    to 0 with that σ; otherwise the axis is ``up``. None when the fit fails or ends at an
+    ``tilt_sigma_rad`` > 0 the axis' lean across the line of sight is fitted too, one angle
+    held to 0 with that σ (none in a view within 17° of ``up``: the module's docstring);
+    otherwise the axis is ``up``. None when the fit fails or ends at an
     absurd shape (k outside [0.4, 2.5])."""
     up = np.asarray(up, dtype=float) / float(np.linalg.norm(up))
     across = np.cross(np.asarray(axis0, dtype=float), up)
@@ -217,9 +227,9 @@ def fit_spheroid(
 
     def jacobian(x: np.ndarray) -> np.ndarray:
         u, du = axis_of(x)
-        J = grazing_jacobian(x[:3], math.exp(x[3]), u, rays)
-        if du is not None:
-            J = np.hstack([J, grazing_axis_jacobian(x[:3], math.exp(x[3]), u, rays) @ du])
+        J, J_axis = _jacobians(x[:3], math.exp(x[3]), u, rays, axis=du is not None)
+        if J_axis is not None and du is not None:
+            J = np.hstack([J, J_axis @ du])
         return np.vstack([J / scale_rad, prior_rows])
 
     try:
