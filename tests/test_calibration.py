@@ -313,7 +313,7 @@ def test_a_model_file_from_before_the_scale_neighbour_and_tail_terms_loads_witho
     path = tmp_path / "old.json"
     path.write_text(json.dumps(old))
     model = load_noise_model(str(path))
-    assert model.centre_var_px2 == (*new.centre_var_px2[:4], 0.0, 0.0) and model.tail_scale == 1.0
+    assert model.centre_var_px2 == (*new.centre_var_px2[:4], 0.0, 0.0, 0.0, 0.0) and model.tail_scale == 1.0
     for bad in ({**data, "tail_scale": 0.5}, {**data, "features": ["floor", "scale"]}):
         path.write_text(json.dumps(bad))
         with pytest.raises(ConfigError, match="noise_model"):
@@ -323,7 +323,7 @@ def test_a_model_file_from_before_the_scale_neighbour_and_tail_terms_loads_witho
 def test_the_planners_noise_of_a_view_not_taken_is_the_models():
     """The BVE's variance a + b·T² of a whole fruit seen at apparent radius f·T is what the
     noise model gives a detection of it with the typical fit: every term that grows with
-    the apparent radius (elongation, scale) included."""
+    the apparent radius (elongation, scale, the close view's) included."""
     from bve_mj.config.settings import load_settings
     from bve_mj.planning.size_information import size_information
 
@@ -332,8 +332,8 @@ def test_the_planners_noise_of_a_view_not_taken_is_the_models():
     info = size_information(settings)
     for T in (0.05, 0.1, 0.2):
         sc, sr = model.expected_sigmas_px(f * T, settings.fruit.shape_index)
-        assert math.sqrt(info.bearing_var[0] + info.bearing_var[1] * T**2) * f == pytest.approx(sc)
-        assert math.sqrt(info.size_var[0] + info.size_var[1] * T**2) * f == pytest.approx(sr)
+        for var, sigma in ((info.bearing_var, sc), (info.size_var, sr)):
+            assert math.sqrt(var[0] + var[1] * T**2 + var[2] * T**4) * f == pytest.approx(sigma)
 
 
 @pytest.mark.parametrize(

@@ -178,6 +178,8 @@ from bve_mj.planning.size_information import SizeInformation  # noqa: E402
 SIZE_INFOS = {
     "bearing_size": SizeInformation((2e-7, 1e-9), (1e-7, 2e-9), bearing=True),
     "size_only": SizeInformation((2e-7, 1e-9), (1e-7, 2e-9), bearing=False),
+    # the close view's term c·T⁴ (NoiseModel's "near"), a few % of the floor at T = 0.1
+    "bearing_size_near": SizeInformation((2e-7, 1e-9, 1e-4), (1e-7, 2e-9, 5e-5), bearing=True),
 }
 
 

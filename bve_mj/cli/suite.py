@@ -207,7 +207,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     )
     for name, coef in (("centre", model.centre_var_px2), ("radius", model.radius_var_px2)):
         r = report[name]
-        names = ("1", "fit²", "partial²", "elongation²", "scale²", "neighbour²")
+        names = ("1", "fit²", "partial²", "elongation²", "scale²", "neighbour²", "neighbour·fit²", "scale⁴")
         terms = " + ".join(f"{c:.4g}·{f}" for c, f in zip(coef, names, strict=True))
         print(
             f"{name:6} variance [px²] = {terms}; error rms {r['error_rms_px']:.3f} px, normalised rms "

@@ -11,20 +11,20 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaig
 - the variance of each is a sum of what the detector can see, with non-negative
   coefficients fitted by maximum likelihood (:func:`fit_noise_model`), in px²:
 
-  σ² = c_floor + c_fit · s_fit² + c_partial · ((1 - arc/360) · r_px / 10)²
-       + c_elongation · (max(k - 1, 0) · r_px / 10)² + c_scale · (r_px / 100)²
-       + c_neighbour · (n · r_px / 10)²
+  σ² = c_floor + (c_fit + c_neighbour_fit · n) · s_fit² + c_partial · ((1 - arc/360) · r_px / 10)²
+       + c_elongation · (max(k - 1, 0) · r_px / 10)² + c_scale · S + c_near · S²
+       + c_neighbour · (n · r_px / 10)²,   S = (r_px / 100)²
 
   with s_fit the fit's own 1σ (from its residuals and how much outline it saw), arc the
-  degrees of outline seen, r_px the apparent radius, k the fruit type's shape index
-  (an elongated fruit, a plum, hangs tilted a little and its outline follows the spheroid
-  the fit assumes less well than a round or flattened one), and n the share of the fitted
+  degrees of outline seen, r_px the apparent radius, k the fruit type's shape index (a plum
+  hangs tilted and its outline follows the spheroid less well), and n the share of the fitted
   circle's rim where a ripe neighbour touches or overlaps the fruit (red on red shows no
-  outline: the fit there rests on shading or on a neighbour's arc near the fruit's circle).
-  The scale term is the error that grows with the fruit's apparent size whatever the fit
-  sees: no real fruit is the spheroid the fit assumes, and its shading is not symmetric,
-  so a close view of a whole fruit still errs by a share of its radius, not by the sub-pixel
-  its residuals promise.
+  outline: the fit there rests on shading or on a neighbour's arc). Where a neighbour's rim
+  runs into the outline the fit's residuals are its misfit (n · s_fit²); a lone fruit's s_fit
+  overstates its error severalfold. The scale terms are the error that grows with the fruit's
+  apparent size whatever the fit sees (no real fruit is the spheroid the fit assumes); a lone
+  fruit's grows faster than its size as the camera closes in (S²: calibration seed 1, 0.12 px²
+  at 0.10-0.15 m against 0.004 px² at 0.4-0.5 m).
 
 - a part of the centre's error is **the fruit's own**, the same from every view: the
   silhouette of a real fruit (tilted, not quite a spheroid, shaded from above, a neighbour's
@@ -59,12 +59,10 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaig
   claim_shape`) whose covariance is m (``moment_scale``) and whose 99.9% bound is κ²
   (``tail_scale``) times the claim before them (the radius' variance m_r times,
   ``radius_moment_scale``), fitted on episode-like estimates (3-6 calibration views of a fruit
-  fused and claimed as the loop does: :mod:`~bve_mj.estimation.noise_tail`); the filter
-  itself fuses with the variances.
+  fused and claimed as the loop does: :mod:`~bve_mj.estimation.noise_tail`).
 
-The fitted model is a JSON file; the package ships one (``default``) and settings name it
-(``measurement.noise_model``). It holds the camera it was made with: a model for another
-camera is refused."""
+The fitted model is a JSON file; the package ships one (``default``), settings name it
+(``measurement.noise_model``), and one made with another camera is refused."""
 
 from __future__ import annotations
 
@@ -94,10 +92,10 @@ __all__ = [
     "measure",
 ]
 
-FEATURES = ("floor", "fit", "partial", "elongation", "scale", "neighbour")
+FEATURES = ("floor", "fit", "partial", "elongation", "scale", "neighbour", "neighbour_fit", "near")
 
-"""The variance terms, in the order of the coefficients. A model file from before the last
-two were added holds the first four: the others count 0 in it."""
+"""The variance terms, in the order of the coefficients. A model file from before the later
+terms were added holds the first four or six: the others count 0 in it."""
 
 
 OFFSET_FEATURES = ("floor", "shape", "neighbour")
@@ -136,9 +134,9 @@ class NoiseModel:
     """Calibrated noise of the detector's centre and apparent radius [px].
 
     Attributes:
-        centre_var_px2: coefficients of the centre's variance per image coordinate, (6,), in
+        centre_var_px2: coefficients of the centre's variance per image coordinate, (8,), in
             the order of :data:`FEATURES`.
-        radius_var_px2: coefficients of the apparent radius' variance, (6,).
+        radius_var_px2: coefficients of the apparent radius' variance, (8,).
         radius_bias_px: the apparent radius' bias b0 + b1 · r_px / 100 [px], (2,).
         typical_fit_px: the median fit σ seen in calibration: what a planner expects of a
             view it has not taken yet [px].
@@ -270,11 +268,15 @@ class NoiseModel:
     def features(
         radius_px: float, arc_deg: float, fit_px: float, shape_index: float, neighbour_share: float = 0.0
     ) -> np.ndarray:
-        """The variance terms of :data:`FEATURES` for one view, (6,)."""
-        partial = max(0.0, 1.0 - arc_deg / 360.0) * radius_px / 10.0
-        elongation = max(shape_index - 1.0, 0.0) * radius_px / 10.0
-        neighbour = min(max(neighbour_share, 0.0), 1.0) * radius_px / 10.0
-        return np.array([1.0, fit_px**2, partial**2, elongation**2, (radius_px / 100.0) ** 2, neighbour**2])
+        """The variance terms of :data:`FEATURES` for one view, (8,): the fit's own σ² also
+        times the neighbour share n (a neighbour's rim in the outline: the fit's residuals are
+        its misfit), and the scale (r_px/100)² also squared (a close view's)."""
+        n, r = min(max(neighbour_share, 0.0), 1.0), radius_px / 10.0
+        partial, elongation = max(0.0, 1.0 - arc_deg / 360.0) * r, max(shape_index - 1.0, 0.0) * r
+        scale = (radius_px / 100.0) ** 2
+        return np.array(
+            [1.0, fit_px**2, partial**2, elongation**2, scale, (n * r) ** 2, n * fit_px**2, scale**2]
+        )
 
     def radius_bias(self, radius_px: float) -> float:
         """How much smaller the detector sees the apparent radius than it is [px] (negative)."""
@@ -316,7 +318,7 @@ class NoiseModel:
 
     def to_json(self) -> dict[str, Any]:
         """The file's content (:func:`load_noise_model` reads it back)."""
-        return {"kind": _KIND, "version": 4, "features": list(FEATURES), **asdict(self)}
+        return {"kind": _KIND, "version": 5, "features": list(FEATURES), **asdict(self)}
 
 
 def _default_path() -> Path:

@@ -123,7 +123,8 @@ def _fit(det: Sequence[dict[str, Any]], camera: CameraConfig, source: str) -> No
         nb = 0 if bias_cols is None else bias_cols.shape[1]
 
         def nll(p: np.ndarray) -> float:
-            v = X @ np.exp(p[nb:])
+            # clipped: a term no row shows has no optimum and would run off to inf (inf · 0)
+            v = X @ np.exp(np.clip(p[nb:], -60.0, 60.0))
             res = e if bias_cols is None else e - bias_cols @ p[:nb]
             return float(0.5 * np.sum(np.log(v) + res**2 / v))
 

@@ -38,9 +38,9 @@ class SizeInformation:
     bearing u: (y_C/(ρg), 0, 1/g, 0, -δ̂y/g²), v: (z_C/(ρg), 0, 0, 1/g, -δ̂z/g²); size:
     (-A₁ T x_C/ρ, A₁/(ρ cos α), 0, 0, A₂) with A₁ = g(1 + T²)/(g² + T²), A₂ = -T/(g² + T²)
     (the bias columns only in a state of 7). The noise the calibrated model expects of a
-    whole fruit of apparent radius f·T [px], as variances [rad²] of the form a + b·T²:
-    ``bearing_var`` and ``size_var``. Every factor is a function of ρ (and R_C^W of c): the
-    derivative is analytic.
+    whole fruit of apparent radius f·T [px], as variances [rad²] of the form a + b·T² + c·T⁴
+    (c the close view's term; a pair (a, b) holds c = 0): ``bearing_var`` and ``size_var``.
+    Every factor is a function of ρ (and R_C^W of c): the derivative is analytic.
 
     ``taken``: unit directions (k, 3) from the estimate to the views fused so far; a view
     from a nearby direction shares their errors and is expected to add only its share Δ(e)
@@ -52,8 +52,8 @@ class SizeInformation:
     is expects almost nothing of the view it repeats).
     """
 
-    bearing_var: tuple[float, float]
-    size_var: tuple[float, float]
+    bearing_var: tuple[float, ...]
+    size_var: tuple[float, ...]
     bearing: bool = True
     taken: np.ndarray | None = None
     correlation: tuple[ViewCorrelation, ViewCorrelation] = (ViewCorrelation(), ViewCorrelation())
@@ -93,8 +93,7 @@ class SizeInformation:
         s_a, ds_a = -A1 * T / rho, -(dA1 * T + A1 * dT) / rho + A1 * T / rho**2
         s_r = A1 * sec / rho
         ds_r = (dA1 * sec + A1 * dsec) / rho - A1 * sec / rho**2
-        va, vb = self.size_var
-        w_a, dw_a = 1.0 / (va + vb * T * T), -(2.0 * vb * T * dT) / (va + vb * T * T) ** 2
+        w_a, dw_a = _weight(self.size_var, T, dT)
         rows, drows_rho, w, dw_rho = [], [], [], []
         size = np.zeros(n)
         size[:3], size[3] = s_a * x, s_r
@@ -103,8 +102,7 @@ class SizeInformation:
         if n == 7:
             size[6], dsize[6] = A2, dA2
         if self.bearing:
-            ba, bb = self.bearing_var
-            w_b, dw_b = 1.0 / (ba + bb * T * T), -(2.0 * bb * T * dT) / (ba + bb * T * T) ** 2
+            w_b, dw_b = _weight(self.bearing_var, T, dT)
             for axis, delta, col in ((1, dy, 4), (2, dz, 5)):
                 h, dh = np.zeros(n), np.zeros(n)
                 h[:3], dh[:3] = R[:, axis] / (rho * g), -R[:, axis] / (rho * rho * g)
@@ -209,12 +207,9 @@ class SizeInformation:
         cos_a = math.sqrt(1.0 - s * s)
         T, sec = s / cos_a, 1.0 / cos_a
         s_a, s_r = -T / rho, sec / rho
-        va, vb = self.size_var
-        w_a = 1.0 / (va + vb * T * T)
-        bb, w_b = 0.0, 0.0
-        if self.bearing:
-            ba, bb = self.bearing_var
-            w_b = 1.0 / (ba + bb * T * T)
+        dT = 0.0 if clipped else -(1.0 + T * T) * T / rho
+        w_a, dw_a = _weight(self.size_var, T, dT)
+        w_b, dw_b = _weight(self.bearing_var, T, dT) if self.bearing else (0.0, 0.0)
         views: tuple[TakenViews, TakenViews] | None = self._taken_views  # type: ignore[attr-defined]
         fc, fr = 1.0, 1.0
         if views is not None:
@@ -274,11 +269,8 @@ class SizeInformation:
             x_nx, x_mv = x0 * nx0 + x1 * nx1 + x2 * nx2, x0 * mv0 + x1 * mv1 + x2 * mv2
             tr_np = tr_n - x_nx  # tr(M⁻¹_cc (I - x xᵀ))
             # factors of ρ and their derivatives d/dρ (∂ρ/∂c = -x, ∂x/∂c_j = (x x_j - e_j)/ρ)
-            dT = 0.0 if clipped else -(1.0 + T * T) * T / rho
             ds_a = -dT / rho + T / (rho * rho)
             ds_r = (0.0 if clipped else sec * T * (-T / rho)) / rho - sec / (rho * rho)
-            dw_a = -(2.0 * vb * T * dT) * w_a * w_a
-            dw_b = -(2.0 * bb * T * dT) * w_b * w_b
             # tr(M⁻¹ ∂Λn_j) = ∂a_j tr_np - 2a (M⁻¹x)·∂x_j + ∂w_j v·M⁻¹v + 2w (M⁻¹v)·∂v_j, each
             # term α x_j + β (M⁻¹x)_j + γ (M⁻¹v)_j (+ the shares' own derivatives)
             da_x = -(dw_b * fc / (rho * rho) - 2.0 * w_b * fc / rho**3)
@@ -304,25 +296,39 @@ class SizeInformation:
         return value, gradient
 
 
+def _weight(var: tuple[float, ...], T: float, dT: float) -> tuple[float, float]:
+    """1/σ² of a noise σ² = a + b·T² (+ c·T⁴) [rad²] and its derivative d/dρ, given dT/dρ."""
+    t2 = T * T
+    v = var[0] + var[1] * t2 + (var[2] * t2 * t2 if len(var) > 2 else 0.0)
+    dv = (2.0 * var[1] * T + (4.0 * var[2] * T * t2 if len(var) > 2 else 0.0)) * dT
+    return 1.0 / v, -dv / (v * v)
+
+
 def size_information(settings: Settings) -> SizeInformation:
     """The planner's model for the radius-in-state filter under ``settings``: the calibrated
     noise (``measurement.noise_model``) of a whole fruit of the prior's shape index, and
     the encoders' white bearing noise."""
-    from bve_mj.estimation.noise import load_noise_model
+    from bve_mj.estimation.noise import FEATURES, load_noise_model
 
     noise = load_noise_model(settings.measurement.noise_model)
     f = settings.camera.focal_px
     k = settings.fruit.shape_index
-    # a whole fruit, no neighbour: σ² [px²] = a + b·r_px² with r_px = f·T; in rad², a/f² + b·T²
-    # (a: the floor and the typical fit; b: the terms that grow with the apparent radius)
+    # a whole fruit, no neighbour: σ² [px²] = a + b·r_px² + c·r_px⁴ with r_px = f·T; in rad²,
+    # a/f² + b·T² + c·f²·T⁴ (a: the floor and the typical fit; b: the terms that grow with the
+    # apparent radius; c: the close view's)
     constant = noise.features(0.0, 360.0, noise.typical_fit_px, k)
-    per_r2 = noise.features(1.0, 360.0, 0.0, k) - noise.features(0.0, 360.0, 0.0, k)
-    c0, c1 = float(np.dot(noise.centre_var_px2, constant)), float(np.dot(noise.centre_var_px2, per_r2))
-    r0, r1 = float(np.dot(noise.radius_var_px2, constant)), float(np.dot(noise.radius_var_px2, per_r2))
+    grown = noise.features(1.0, 360.0, 0.0, k) - noise.features(0.0, 360.0, 0.0, k)
+    per_r4 = np.zeros_like(grown)
+    per_r4[FEATURES.index("near")] = grown[FEATURES.index("near")]  # (1/100)⁴ per r_px⁴
+    per_r2 = grown - per_r4
+    (c0, c1, c2), (r0, r1, r2) = (
+        tuple(float(np.dot(coef, t)) for t in (constant, per_r2, per_r4))
+        for coef in (noise.centre_var_px2, noise.radius_var_px2)
+    )
     enc = (2.5 * settings.sensor.encoder_noise_rad) ** 2
     return SizeInformation(
-        (c0 / f**2 + enc, float(c1)),
-        (r0 / f**2, float(r1)),
+        (c0 / f**2 + enc, c1, c2 * f**2),
+        (r0 / f**2, r1, r2 * f**2),
         settings.measurement.kind != "range",
         correlation=(noise.centre_correlation, noise.radius_correlation),
     )
