@@ -49,8 +49,8 @@ Their errors, measured on rendered views against the truth (:mod:`bve_mj.campaig
   fruits' mean squared normalised error grows as exp(b · refused share) (``refusal_scale``
   b, fitted), and an episode's claimed covariance grows with it
   (:class:`bve_mj.loop.claims.Claims`).
-- a few views err **ten times** the model's σ, and nothing the detector reports tells which
-  (in truss scenes one in sixteen of the every-fruit detector's: a fit along a neighbour's
+- a few views err **eight times** the model's σ, and nothing the detector reports tells which
+  (in truss scenes one in thirty of the every-fruit detector's: a fit along a neighbour's
   edge). The every-fruit tracker fuses each view under a scale mixture, a share
   ``outlier_share`` of views erring ``outlier_scale`` times the σ
   (:mod:`bve_mj.estimation.outliers`), fitted to the neighbours' rows of ``bve-mj calibrate
