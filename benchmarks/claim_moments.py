@@ -10,7 +10,10 @@ rows under it here (:func:`bve_mj.estimation.noise_tail.fit_claim_shape`: episod
 of 3-6 views of each calibration fruit, and single views). Prints, of episodes (the camera
 measurement) and of single views (size-only episodes): κ² (the bound), m (the second moment
 over the claim before κ²), ρ = κ²/m and the Student-t's ν; of episodes also m_r, the radius'
-own, and ρ_r = κ²/m_r (a size-only episode claims its radius as its centre). ``--write``
+own, and ρ_r = κ²/m_r (a size-only episode claims its radius as its centre). ``--groups``
+also prints the draws by calibration scenario and by the fruit's mean neighbour share: how
+many fruits, their m, and their 99.9% quantile over χ²₃'s (κ² before the bootstrap's bound),
+to see which fruits set κ². ``--write``
 saves the model with the refitted moment scales (its κ², the bound the loop decides with,
 kept as calibrated; its source told so).
 """
@@ -19,14 +22,24 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
+
+import numpy as np
 
 from bve_mj.atomic import write_json_atomic
 from bve_mj.cli.script import ScriptParser, guarded
 from bve_mj.config import Settings
+from bve_mj.estimation.metrics import chi2_quantile
 from bve_mj.estimation.noise import NoiseModel, load_noise_model
 from bve_mj.estimation.noise_fit import split_gross
-from bve_mj.estimation.noise_tail import fit_claim_shape
+from bve_mj.estimation.noise_tail import (
+    TAIL_PROBABILITY,
+    episode_draws,
+    fit_claim_shape,
+    fruit_key,
+    row_sigmas,
+)
 
 MOMENTS = ("moment_scale", "view_moment_scale", "radius_moment_scale")
 
@@ -49,10 +62,38 @@ def _line(name: str, tail: float, moment: float | None, radius: float | None, mo
     return line + f"  m_r {radius:.4f}  ρ_r {tail / radius:.2f}"
 
 
+NEIGHBOUR_BINS = ((0.0, 0.02), (0.02, 0.2), (0.2, 0.4), (0.4, 1.01))
+"""The bins of a fruit's mean neighbour share over its views (``--groups``)."""
+
+
+def _groups(kept: list[dict], refused: list[dict], model: NoiseModel, focal_px: float) -> None:
+    draws = episode_draws(kept, refused, model, focal_px, partial(row_sigmas, model))
+    share: dict = {}
+    for r in kept:
+        share.setdefault(fruit_key(r), []).append(float(r.get("neighbour_share", 0.0)))
+    chi2 = float(chi2_quantile(TAIL_PROBABILITY, 3))
+
+    def line(name: str, keys: list) -> str:
+        if not keys:
+            return f"  {name:24s} no fruit"
+        nees = np.array([draws[k][0] for k in keys])
+        q = float(np.quantile(nees, TAIL_PROBABILITY)) / chi2
+        return f"  {name:24s} fruits {len(keys):3d}  m {nees.mean() / 3.0:.3f}  q99.9/χ²₃ {q:.2f}"
+
+    print("episode-like draws by calibration scenario:")
+    for scenario in sorted({str(k[0]) for k in draws}):
+        print(line(scenario, [k for k in draws if str(k[0]) == scenario]))
+    print("by the fruit's mean neighbour share:")
+    for lo, hi in NEIGHBOUR_BINS:
+        keys = [k for k in draws if lo <= float(np.mean(share[k])) < hi]
+        print(line(f"[{lo:g}, {min(hi, 1.0):g}{')' if hi < 1.0 else ']'}", keys))
+
+
 def main() -> None:
     ap = ScriptParser(description=__doc__)
     ap.add_argument("rows_json", type=Path, help="a `bve-mj calibrate --json` file")
     ap.add_argument("--model", default="default", help="the noise model the rows are read under")
+    ap.add_argument("--groups", action="store_true", help="the draws by scenario and neighbour share too")
     ap.add_argument("--write", type=Path, help="save the model with the refitted scales here (.json)")
     args = ap.parse_args()
     if args.write is not None and args.write.suffix.lower() != ".json":
@@ -71,6 +112,8 @@ def main() -> None:
     view = (fitted.view_tail_scale, fitted.view_moment_scale, None)
     print(_line("single views", *view, fitted))
     print(f"(shipped: κ² {model.tail_scale:.3f}, m {model.moment_scale}, m_r {model.radius_moment_scale})")
+    if args.groups:
+        _groups(kept, refused, model, camera.focal_px)
     if args.write is not None:
         source = f"{model.source}; moment scales refitted (benchmarks/claim_moments.py {args.rows_json.name})"
         moments = {k: getattr(fitted, k) for k in MOMENTS}

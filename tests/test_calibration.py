@@ -204,6 +204,38 @@ def test_the_radius_second_moment_is_its_own(rng):
     assert wide.moment_scale == pytest.approx(honest.moment_scale, rel=0.25)
 
 
+def test_the_tail_draws_are_per_fruit_and_are_what_the_tails_are_fitted_on(rng):
+    """``episode_draws`` gives each calibration fruit of 4 views or more its own draws, and
+    ``episode_tails``' moments are their means: a fruit whose errors are made five times
+    larger stands out in its own draws (``benchmarks/claim_moments.py --groups`` reads them
+    so) and raises the moment scale."""
+    from bve_mj.estimation.noise_tail import TAIL_DRAWS, episode_draws, episode_tails, fruit_key
+
+    rows = _synthetic_rows(rng, fruits=30, views=6)
+    model = load_noise_model("default")
+
+    def sigmas(r):
+        return model.sigmas_px(r["radius_px"], r["arc_deg"], r["centre_fit_px"], r["radius_fit_px"], 0.9)
+
+    f = CameraConfig().focal_px
+    draws = episode_draws(rows, [], model, f, sigmas)
+    assert set(draws) == {fruit_key(r) for r in rows} and len(draws) == 30
+    assert all(len(n) == len(rn) == TAIL_DRAWS for n, rn in draws.values())
+    tails = episode_tails(rows, [], model, f, sigmas)
+    mean = float(np.mean([n for n, _ in draws.values()])) / 3.0
+    assert tails.moment_scale == pytest.approx(min(mean, tails.tail_scale))
+    assert tails.radius_moment_scale == pytest.approx(float(np.mean([rn for _, rn in draws.values()])))
+    bad = fruit_key(rows[0])
+    worse = [
+        {**r, "err_u_px": 5.0 * r["err_u_px"], "err_v_px": 5.0 * r["err_v_px"]} if fruit_key(r) == bad else r
+        for r in rows
+    ]
+    worse_draws = episode_draws(worse, [], model, f, sigmas)
+    others = [np.mean(n) for k, (n, _) in worse_draws.items() if k != bad]
+    assert np.mean(worse_draws[bad][0]) > 5.0 * np.median(others)
+    assert episode_tails(worse, [], model, f, sigmas).moment_scale > tails.moment_scale
+
+
 def test_the_tail_draws_count_views_from_one_place_as_the_share_they_add(rng):
     """Fruits whose views come in twins (two views 1 mm apart, one error: a view from one
     place repeats its error): an episode-like draw that counts the twin as a fresh view

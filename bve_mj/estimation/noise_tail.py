@@ -21,6 +21,7 @@ __all__ = [
     "TAIL_PROBABILITY",
     "FruitKey",
     "Tails",
+    "episode_draws",
     "episode_tails",
     "fit_claim_shape",
     "fruit_key",
@@ -104,6 +105,35 @@ def episode_tails(
     radius alone, its squared error over its claimed variance before κ² (its errors are not
     the centre's: lighter-tailed, and a smaller share of what the claim holds)."""
     from bve_mj.estimation.metrics import chi2_quantile
+
+    rng = np.random.default_rng(0)  # the draws', then the bootstrap's
+    draws = episode_draws(kept, refused, model, focal_px, sigmas_px, rng)
+    if len(draws) < 20:
+        return Tails(1.0)
+    nees = [n for n, _ in draws.values()]
+    radius_nees = [r for _, r in draws.values()]
+    # the quantile rests on a handful of fruits: bound it by the fruits' bootstrap
+    per_fruit = np.array(nees)
+    q = [
+        float(np.quantile(per_fruit[rng.integers(0, len(per_fruit), len(per_fruit))], TAIL_PROBABILITY))
+        for _ in range(TAIL_BOOTSTRAP)
+    ]
+    ratio = float(np.quantile(q, TAIL_BOUND)) / float(chi2_quantile(TAIL_PROBABILITY, 3))
+    kappa2 = max(1.0, ratio)
+    return Tails(kappa2, min(float(np.mean(per_fruit)) / 3.0, kappa2), float(np.mean(radius_nees)))
+
+
+def episode_draws(
+    kept: Sequence[dict[str, Any]],
+    refused: Sequence[dict[str, Any]],
+    model: NoiseModel,
+    focal_px: float,
+    sigmas_px: Callable[[dict[str, Any]], tuple[float, float]],
+    rng: np.random.Generator | None = None,
+) -> dict[FruitKey, tuple[list[float], list[float]]]:
+    """The episode-like draws :func:`episode_tails` fits κ², m and m_r on, per calibration
+    fruit of 4 views or more (:func:`fruit_key`): (its draws' centre NEES under the claim
+    before κ², their radius NEES), :data:`TAIL_DRAWS` each, drawn with ``rng`` (None: seeded 0)."""
     from bve_mj.estimation.models import BearingSizeModel
     from bve_mj.estimation.view_correlation import new_view_share
 
@@ -113,14 +143,12 @@ def episode_tails(
             views_of.setdefault(fruit_key(r), []).append(r)
     shares = _refusals([*kept, *refused])
     fruits = {key: rows for key, rows in views_of.items() if len(rows) >= 4}
-    if len(fruits) < 20:
-        return Tails(1.0)
-    rng = np.random.default_rng(0)
-    nees: list[list[float]] = []  # per fruit, its draws
-    radius_nees: list[list[float]] = []
+    rng = np.random.default_rng(0) if rng is None else rng
+    draws: dict[FruitKey, tuple[list[float], list[float]]] = {}
     for key, rows in fruits.items():
-        nees.append([])
-        radius_nees.append([])
+        nees: list[float] = []
+        radius_nees: list[float] = []
+        draws[key] = (nees, radius_nees)
         truth, radius = np.asarray(rows[0]["truth_m"], dtype=float), float(rows[0]["true_radius_m"])
         x = np.r_[truth, radius]
         prior_info = np.diag([1.0 / 0.05**2] * 3 + [1.0 / (0.087 * radius) ** 2])  # a wide prior
@@ -166,17 +194,9 @@ def episode_tails(
             s2 = (INNOVATION_PRIOR_DOF + cost) / (INNOVATION_PRIOR_DOF + dof)
             outlines = [Outline(float(r.get("neighbour_share", 0.0))) for r in drawn]
             claim = (P[:3, :3] * s2 + model.centre_offset_cov(radius, shape_index, outlines)) * refusal
-            nees[-1].append(float(dx[:3] @ np.linalg.solve(claim, dx[:3])))
-            radius_nees[-1].append(float(dx[3] ** 2 / (P[3, 3] * s2 * refusal)))
-    # the quantile rests on a handful of fruits: bound it by the fruits' bootstrap
-    per_fruit = np.array(nees)
-    q = [
-        float(np.quantile(per_fruit[rng.integers(0, len(per_fruit), len(per_fruit))], TAIL_PROBABILITY))
-        for _ in range(TAIL_BOOTSTRAP)
-    ]
-    ratio = float(np.quantile(q, TAIL_BOUND)) / float(chi2_quantile(TAIL_PROBABILITY, 3))
-    kappa2 = max(1.0, ratio)
-    return Tails(kappa2, min(float(np.mean(per_fruit)) / 3.0, kappa2), float(np.mean(radius_nees)))
+            nees.append(float(dx[:3] @ np.linalg.solve(claim, dx[:3])))
+            radius_nees.append(float(dx[3] ** 2 / (P[3, 3] * s2 * refusal)))
+    return draws
 
 
 def view_tails(
