@@ -110,10 +110,9 @@ def episode_tails(
     draws = episode_draws(kept, refused, model, focal_px, sigmas_px, rng)
     if len(draws) < 20:
         return Tails(1.0)
-    nees = [n for n, _ in draws.values()]
-    radius_nees = [r for _, r in draws.values()]
+    per_fruit = np.array([n for n, _ in draws.values()])
+    radius_nees = np.array([r for _, r in draws.values()])
     # the quantile rests on a handful of fruits: bound it by the fruits' bootstrap
-    per_fruit = np.array(nees)
     q = [
         float(np.quantile(per_fruit[rng.integers(0, len(per_fruit), len(per_fruit))], TAIL_PROBABILITY))
         for _ in range(TAIL_BOOTSTRAP)
