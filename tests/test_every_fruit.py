@@ -645,6 +645,25 @@ def test_a_harvest_that_swept_through_an_unseen_truss_now_approaches_from_the_ai
         assert v.clearance_m > 0.0, f"the arm touched a fruit visiting track {v.track}"
 
 
+def test_the_places_behind_the_front_row_keep_an_episode_from_saying_it_found_every_fruit():
+    """`truss_cluster` 428971644: every view from the aisle, below the truss; the two ripe fruit
+    behind the front row never measured. Counting a place framed once in an image, the episode
+    says it found every fruit; with ``tracking.zone_behind_fruit`` the places where a
+    neighbour of the known fruit would sit must have been shown past them, and it does not."""
+    from bve_mj.campaigns.scenarios import suite_dir
+    from bve_mj.loop.mujoco_fruits import run_every_fruit_episode
+    from bve_mj.loop.outcomes import Outcome
+
+    s = with_overrides(load_settings(suite_dir() / "truss_cluster.toml"), tracking={"fruits": "all"})
+    loose = run_every_fruit_episode(s, 428971644)
+    matches, _, _ = loose.matches()
+    assert sum(not m.localised_within(5.0) for m in matches) == 2
+    assert loose.result.outcome == Outcome.CONVERGED  # the wrong answer the option is for
+    strict = run_every_fruit_episode(with_overrides(s, tracking={"zone_behind_fruit": True}), 428971644)
+    assert strict.result.outcome != Outcome.CONVERGED
+    assert strict.result.views[-1].zone_framed < 1.0
+
+
 def test_the_views_keep_the_arm_off_the_fruit_the_robot_knows():
     """`cherry_truss`, the suite's episode 0 of seed 9494: a false track ranged 30 cm behind
     the row drew the views towards it (`restoring`), end link and wrist 5-20 mm into six

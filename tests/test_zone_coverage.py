@@ -397,3 +397,59 @@ def test_a_track_deleted_in_the_view_that_missed_it_is_not_reported_hidden():
     last = next(v for v in res.views if any(e.kind == "deleted" for e in v.tracking.events))
     assert deleted <= set(last.tracking.expected)  # expected, missed and deleted in one view
     assert set(planner.hidden) & deleted  # its misses before the deletion were reported
+
+
+def test_the_detected_share_follows_the_outline_shown_and_is_nil_below_the_detectors_arc():
+    from bve_mj.planning.zone_coverage import DETECTED_BY_ARC, detected_share
+
+    q = detected_share(np.array([0.0, 149.0, 150.0, 200.0, 359.0, 360.0]), 150.0)
+    assert q[0] == 0.0 and q[1] == 0.0
+    assert q[2] == DETECTED_BY_ARC[0][1] and q[-1] == DETECTED_BY_ARC[-1][1]
+    assert q[-1] > q[3] > q[2] > 0.0  # a whole outline is measured more often than part of one
+    assert detected_share(np.array([200.0]), 210.0)[0] == 0.0  # a stricter detector refuses it
+
+
+def test_the_outline_past_a_known_fruit_is_none_behind_it_and_whole_beside_it():
+    from bve_mj.planning.zone_coverage import outline_past
+
+    p = CENTRE - np.array([0.3, 0.0, 0.0])
+    R = camera_rotation(p, CENTRE)
+    known = (CENTRE[None, :], np.array([RADIUS]))
+    points = np.array([
+        CENTRE + [0.065, 0.0, 0.0],  # right behind it, touching it: hidden
+        CENTRE + [0.0, 0.08, 0.0],  # beside it: the whole outline
+        CENTRE + [0.01, 0.0, 0.0],  # inside it: the known fruit holds the point
+        CENTRE + [0.0, 0.0, 0.2],  # far above: no neighbour of it
+    ])  # fmt: skip
+    arc, occupied, near = outline_past(points, RADIUS, p, R, *known, F, W, H)
+    assert arc[0] == 0.0 and arc[1] == 360.0
+    assert list(occupied) == [False, False, True, False]
+    assert list(near) == [True, True, True, False]
+    none = outline_past(points, RADIUS, p, R, np.zeros((0, 3)), np.zeros(0), F, W, H)
+    assert none[0][0] == 360.0 and not none[1].any() and not none[2].any()
+
+
+def test_the_place_behind_a_known_fruit_is_framed_only_once_a_view_shows_past_it():
+    """With the detector's arc, the neighbour's place right behind a known fruit seen from the
+    front stays unframed until a view from the side shows a fruit there; the views before a
+    fruit was known are counted again past it; without the arc, one image frames it."""
+    behind = CENTRE + np.array([0.0625, 0.0, 0.0])
+    front = CENTRE - np.array([0.3, 0.0, 0.0])
+    side = CENTRE + np.array([0.05, -0.3, 0.0])
+    known = (CENTRE[None, :], np.array([RADIUS]))
+    strict = ZoneCoverage(CENTRE, 0.15, RADIUS, F, W, H, 0.8, min_arc_deg=150.0)
+    strict.points_m = np.vstack([strict.points_m, behind])  # the place itself, on no grid node
+    strict.framed = np.zeros(len(strict.points_m), dtype=bool)
+    strict._counts_from = np.zeros(len(strict.points_m), dtype=int)
+    strict.note(front, camera_rotation(front, CENTRE))  # nothing known yet: a clear view
+    assert strict.framed[-1]
+    strict.note(front, camera_rotation(front, CENTRE), known)  # the fruit found: hidden behind it
+    assert not strict.framed[-1]
+    strict.note(side, camera_rotation(side, CENTRE), known)
+    assert strict.framed[-1]
+    loose = _coverage()
+    loose.points_m = np.vstack([loose.points_m, behind])
+    loose.framed = np.zeros(len(loose.points_m), dtype=bool)
+    loose._counts_from = np.zeros(len(loose.points_m), dtype=int)
+    loose.note(front, camera_rotation(front, CENTRE), known)
+    assert loose.framed[-1]

@@ -104,6 +104,18 @@ class TrackingConfig:
             "most of what is not framed yet; 0 = no such check",
         ),
     )
+    zone_behind_fruit: bool = field(
+        default=False,
+        metadata=_why(
+            "before the episode says it found every fruit, the places where a neighbour of a known "
+            "fruit would sit (within two radii of touching it) must have been shown past the known "
+            "fruit: the views would have measured a fruit there as surely as one clear view does, "
+            "from the outline each shows of it and the share of such views the detector measures. "
+            "Off: a place counts as seen once in an image (a fruit hidden behind the front row "
+            "can go unnoticed: truss_cluster 428971644); on: such episodes end incomplete, and "
+            "so do most whose views all come from one side of the truss"
+        ),
+    )
     candidates: int = field(
         default=2,
         metadata=_why(
@@ -139,8 +151,9 @@ class TrackingConfig:
         _positive_int("tracking", "confirm_hits", self.confirm_hits, 100)
         _positive_int("tracking", "delete_misses", self.delete_misses, 100)
         _positive_int("tracking", "candidates", self.candidates, 32)
-        if not isinstance(self.unhide, bool):
-            raise ConfigError("tracking.unhide", self.unhide, "true or false")
+        for name in ("unhide", "zone_behind_fruit"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"tracking.{name}", getattr(self, name), "true or false")
         rounds = self.pick_rounds
         if isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or not 0 <= rounds <= 10:
             raise ConfigError("tracking.pick_rounds", rounds, "an integer in [0, 10]")

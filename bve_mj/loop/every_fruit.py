@@ -177,7 +177,12 @@ def run_every_fruit(
         planner.note_explored(here, tracker.zone_centre_m)
         if coverage is not None:
             before = coverage.share
-            coverage.note(camera.p_world_camera, camera.R_world_camera)
+            known = [t for t in tracker.tracks if t.confirmed]
+            blockers = (
+                np.array([t.centre_m for t in known]).reshape(-1, 3),
+                np.array([t.radius_m for t in known]),
+            )
+            coverage.note(camera.p_world_camera, camera.R_world_camera, blockers)
             if framing is not None and not coverage.share > before:  # the arm cannot frame it
                 coverage.give_up(framing)
                 events.append(Event("zone_unframed", f"near {np.round(framing, 3).tolist()}"))

@@ -348,7 +348,11 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     surveys = 0
     visited: set[int] = set()  # the tracks a harvest went to
     explored: list[np.ndarray] = []  # every survey's view directions: the span is over all
-    coverage = ZoneCoverage(*grid, search.band_distance_m) if s.tracking.zone_framed_share > 0.0 else None
+    coverage = (
+        ZoneCoverage(*grid, search.band_distance_m, min_arc if s.tracking.zone_behind_fruit else 0.0)
+        if s.tracking.zone_framed_share > 0.0
+        else None
+    )
 
     def survey() -> FruitsResult:  # from where the arm is; after a harvest, framing again around what it took
         nonlocal views_before, surveys
