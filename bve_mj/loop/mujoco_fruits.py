@@ -341,6 +341,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         planner = PatternPlanner(check.planner(baseline), zone_belief)
     claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF)
     rounds = s.tracking.pick_rounds
+    behind = min_arc if s.tracking.zone_behind_fruit else 0.0
     grid = (zone, s.tracking.zone_m, fruit.radius_m, f, cam.width_px, cam.height_px, s.tracking.max_range_m)
 
     picked_at: list[np.ndarray] = []  # the fruit picked since the last survey
@@ -349,9 +350,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
     visited: set[int] = set()  # the tracks a harvest went to
     explored: list[np.ndarray] = []  # every survey's view directions: the span is over all
     coverage = (
-        ZoneCoverage(*grid, search.band_distance_m, min_arc if s.tracking.zone_behind_fruit else 0.0)
-        if s.tracking.zone_framed_share > 0.0
-        else None
+        ZoneCoverage(*grid, search.band_distance_m, behind) if s.tracking.zone_framed_share > 0.0 else None
     )
 
     def survey() -> FruitsResult:  # from where the arm is; after a harvest, framing again around what it took
