@@ -21,7 +21,7 @@ import numpy as np
 
 from bve_mj.geometry import VERTICAL_EPS, project_points
 
-__all__ = ["image_discs", "outline_shown_deg", "visible_arc_deg"]
+__all__ = ["arc_past_discs", "image_discs", "outline_shown_deg", "visible_arc_deg"]
 
 _SAMPLES = 72  # points on each outline (5° apart)
 
@@ -50,6 +50,28 @@ def image_discs(
     alpha = np.arcsin(np.clip(r / np.maximum(rho, 1e-12), 0.0, 1.0))
     radius_px = np.where(front, focal_px * np.tan(np.minimum(alpha, 1.5)), 0.0)
     return uv, radius_px, front
+
+
+def arc_past_discs(
+    uv: np.ndarray,
+    radius_px: np.ndarray,
+    cover_uv: np.ndarray,
+    cover_radius_px: np.ndarray,
+    width_px: int,
+    height_px: int,
+) -> np.ndarray:
+    """(n,) degrees of each circle (centres ``uv`` (n, 2), radii ``radius_px`` (n,) [px]) that
+    lie in the image and outside every one of the discs ``cover_uv``/``cover_radius_px``
+    ((k, 2)/(k,) [px]; a disc of radius 0 covers nothing)."""
+    theta = np.linspace(0.0, 2.0 * math.pi, _SAMPLES, endpoint=False)
+    ring = np.stack([np.cos(theta), np.sin(theta)], axis=1)  # (S, 2)
+    pts = uv[:, None, :] + radius_px[:, None, None] * ring[None, :, :]  # (n, S, 2)
+    shown = (pts[..., 0] >= 0.0) & (pts[..., 0] < width_px) & (pts[..., 1] >= 0.0) & (pts[..., 1] < height_px)
+    if len(cover_uv):
+        du = pts[:, None, :, 0] - cover_uv[None, :, None, 0]
+        dv = pts[:, None, :, 1] - cover_uv[None, :, None, 1]
+        shown &= ~np.any(np.hypot(du, dv) < cover_radius_px[None, :, None], axis=1)  # (n, k, S)
+    return shown.sum(axis=1) * (360.0 / _SAMPLES)
 
 
 def visible_arc_deg(

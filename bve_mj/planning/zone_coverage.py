@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bve_mj.estimation.visibility import image_discs
+from bve_mj.estimation.visibility import arc_past_discs, image_discs
 from bve_mj.geometry import camera_rotation, project_points
 
 __all__ = ["DETECTED_BY_ARC", "GRID_STEPS", "ZoneCoverage", "detected_share", "outline_past", "zone_grid"]
@@ -79,7 +79,7 @@ def detected_share(arc_deg: np.ndarray, min_arc_deg: float) -> np.ndarray:
     edges = np.array([e for e, _ in DETECTED_BY_ARC])
     shares = np.array([0.0] + [q for _, q in DETECTED_BY_ARC])
     out = shares[np.searchsorted(edges, np.minimum(a, 360.0), side="right")]
-    return np.where(a >= min_arc_deg, np.maximum(out, 0.0), 0.0)
+    return np.where(a >= min_arc_deg, out, 0.0)
 
 
 def outline_past(
@@ -104,26 +104,13 @@ def outline_past(
     c = np.asarray(centres_m, dtype=float).reshape(-1, 3)
     r = np.asarray(radii_m, dtype=float).reshape(-1)
     n = len(pts)
-    uv, rad, front = image_discs(
-        pts, np.full(n, fruit_radius_m), p_world_camera, R_world_camera, focal_px, width_px, height_px
-    )
-    theta = np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)
-    ring = np.stack([np.cos(theta), np.sin(theta)], axis=1)
-    outline = uv[:, None, :] + rad[:, None, None] * ring[None, :, :]  # (n, S, 2)
-    shown = (outline[..., 0] >= 0.0) & (outline[..., 0] < width_px)
-    shown &= (outline[..., 1] >= 0.0) & (outline[..., 1] < height_px)
-    occupied = np.zeros(n, dtype=bool)
-    near = np.zeros(n, dtype=bool)
-    if len(c):
-        kuv, krad, kfront = image_discs(c, r, p_world_camera, R_world_camera, focal_px, width_px, height_px)
-        du = outline[:, None, :, 0] - kuv[None, :, None, 0]
-        dv = outline[:, None, :, 1] - kuv[None, :, None, 1]
-        inside = np.hypot(du, dv) < krad[None, :, None]  # (n, k, S)
-        shown &= ~np.any(inside & kfront[None, :, None], axis=1)
-        gap = np.linalg.norm(pts[:, None, :] - c[None, :, :], axis=2) - r[None, :]
-        occupied = np.any(gap < OCCUPIED_SHARE * fruit_radius_m, axis=1)
-        near = np.any(gap < NEIGHBOUR_GAP_SHARE * fruit_radius_m, axis=1)
-    arc = np.where(front, shown.sum(axis=1) * (360.0 / 72), 0.0)
+    cam = (p_world_camera, R_world_camera, focal_px, width_px, height_px)
+    uv, rad, front = image_discs(pts, np.full(n, fruit_radius_m), *cam)
+    kuv, krad, _ = image_discs(c, r, *cam) if len(c) else (np.zeros((0, 2)), np.zeros(0), None)
+    arc = np.where(front, arc_past_discs(uv, rad, kuv, krad, width_px, height_px), 0.0)
+    gap = np.linalg.norm(pts[:, None, :] - c[None, :, :], axis=2) - r[None, :]  # (n, k)
+    occupied = np.any(gap < OCCUPIED_SHARE * fruit_radius_m, axis=1)
+    near = np.any(gap < NEIGHBOUR_GAP_SHARE * fruit_radius_m, axis=1)
     return arc, occupied, near
 
 
