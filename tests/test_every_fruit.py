@@ -1,6 +1,7 @@
 """Every fruit of a truss: the planner's joint information, the harvest order, the command
 line, and a seeded episode in the rendered greenhouse."""
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -782,3 +783,30 @@ def test_with_a_miscalibrated_camera_every_track_carries_the_biases_and_claims_w
     claimed = [m for m in matches if m.track is not None and m.track.localised]
     assert sum(m.localised_within(5.0) for m in matches) >= 3
     assert claimed and all(m.nees <= 16.27 for m in claimed), [round(m.nees, 1) for m in claimed]
+
+
+def test_a_tracks_claim_adds_the_offset_of_what_the_detector_saw_of_it():
+    """The claim's centre offset is the noise model's, conditioned on the neighbour shares of
+    the views the track fused (a fruit touching its neighbours is off by more than a lone
+    one, and a lone one by less than the bound over all fruits); where a view's outline is
+    not known, the bound over all fruits."""
+    from bve_mj.estimation.belief import Belief
+    from bve_mj.estimation.noise import Outline, load_noise_model
+    from bve_mj.estimation.tracks import Track
+    from bve_mj.loop.claims import Claims
+    from bve_mj.loop.every_fruit import claimed
+
+    noise = load_noise_model()
+    claims = dataclasses.replace(Claims.of_detector(noise, 0.03, None), tail_scale=1.0, refusal_scale=0.0)
+    centre = np.array([0.45, 0.02, 0.20])
+
+    def offset(outlines):
+        track = Track(0, Belief(np.r_[centre, 0.03], np.eye(4) * 1e-9), 0, 3, hits=3, outlines=outlines)
+        state = claimed(track, claims, stop_sigma_m=0.002, converge_after=3)
+        return state.belief.cov[:3, :3] - np.eye(3) * 1e-9
+
+    lone, touching = offset([Outline(0.0)] * 3), offset([Outline(0.6)] * 3)
+    bound = noise.centre_bias_cov(0.03)
+    assert np.allclose(lone, noise.centre_offset_cov(0.03, 1.0, [Outline(0.0)] * 3))
+    assert np.trace(lone) < np.trace(bound) < np.trace(touching)
+    assert np.allclose(offset([Outline(0.0), None, Outline(0.0)]), bound)

@@ -655,3 +655,29 @@ def test_a_tracks_sensor_share_is_the_covariance_of_the_errors_the_sensors_make(
     assert len(rows) >= 40
     assert 2.0 < np.mean(nees) < 4.2 and np.mean(nees > 16.27) < 0.03, np.mean(nees)
     assert 0.2 < np.median(share) < 0.98
+
+
+def test_a_track_keeps_what_the_detector_saw_of_each_view_it_fused_through_merges():
+    """Each sighting's outline (its neighbour share) goes with the view into the track that
+    takes it: the first detection's, each fused one's, and a merged track's; a snapshot's list
+    is its own."""
+    from bve_mj.estimation.noise import Outline
+
+    fruit, r = np.array([0.45, 0.02, 0.3]), 0.027
+    cfg = TrackingConfig(fruits="all", zone_m=0.2, gate_probability=1e-6, confirm_hits=2)  # gate shut
+    tracker = Tracker(cfg, fruit, (0.03, 0.003), UPDATE, _visible())
+    (p0, R0), (p1, R1) = _views(5)[0], _views(5)[4]
+    tracker.step([Sighting(_z(fruit, r, p0, R0), _model(p0, R0), outline=Outline(0.2))], _model(p0, R0), 0)
+    tracker.step([Sighting(_z(fruit, r, p1, R1), _model(p1, R1), outline=None)], _model(p1, R1), 1)
+    (t,) = tracker.tracks  # the two tentative tracks merged
+    assert sorted(t.outlines, key=lambda o: -1.0 if o is None else o.neighbour_share) == [None, Outline(0.2)]
+    cfg_open = TrackingConfig(fruits="all", zone_m=0.2, confirm_hits=2)
+    tracker = Tracker(cfg_open, fruit, (0.03, 0.003), UPDATE, _visible())
+    for view, (p, R) in enumerate(_views(3)):
+        seen = Sighting(_z(fruit, r, p, R), _model(p, R), outline=Outline(0.1 * view))
+        tracker.step([seen], _model(p, R), view)
+    (t,) = tracker.tracks
+    assert t.hits == 3 and t.outlines == [Outline(0.0), Outline(0.1), Outline(0.2)]
+    (copy,) = tracker.snapshot()
+    copy.outlines.append(None)
+    assert len(t.outlines) == 3

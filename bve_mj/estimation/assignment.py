@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -16,6 +17,7 @@ from bve_mj.errors import EstimationError
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.ekf import nis_threshold
 from bve_mj.estimation.models import BearingSizeModel
+from bve_mj.estimation.noise import Outline
 
 __all__ = [
     "KNOWN_IMAGE_SHARE",
@@ -48,11 +50,20 @@ class Sighting:
     """One fruit measured in one view: z = (t_y/t_x, t_z/t_x, α) and its model (the camera's
     pose at the view and the measurement's covariance); ``sensor_cov``: the part of that
     covariance the declared sensor errors make (encoder noise), None where none
-    (:mod:`bve_mj.estimation.sensor_share`)."""
+    (:mod:`bve_mj.estimation.sensor_share`); ``outline``: what the detector saw of the fruit's
+    outline (the claims' offset is conditioned on it), None where not known."""
 
     z: np.ndarray
     model: BearingSizeModel
     sensor_cov: np.ndarray | None = None
+    outline: Outline | None = None
+
+
+def detected_outline(det: Any) -> Outline | None:
+    """What the built-in detector saw of a detection's outline (its neighbour share); None for
+    one that states its own covariance (another detector's: the claims keep the noise model's
+    bound over all fruits for it)."""
+    return None if getattr(det, "measurement_cov", None) is not None else Outline(det.neighbour_share)
 
 
 def belief_from_detection(

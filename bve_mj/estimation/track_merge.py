@@ -74,6 +74,7 @@ def merge_duplicates(
                 keep.innovations += drop.innovations
                 keep.directions += drop.directions
                 keep.cameras += drop.cameras
+                keep.outlines += drop.outlines
                 keep.last_view = max(keep.last_view, drop.last_view)
                 tracks.remove(drop)
                 merges.append((drop.id, keep.id))

@@ -52,6 +52,7 @@ from bve_mj.estimation.assignment import Sighting, assign, belief_from_detection
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.ekf import UpdateResult, nis_threshold
 from bve_mj.estimation.models import BearingSizeModel
+from bve_mj.estimation.noise import Outline
 from bve_mj.estimation.outliers import OutlierMixture, mixture_update
 from bve_mj.estimation.sensor_share import added, calibration_information, measurement_information
 from bve_mj.estimation.track_merge import merge_duplicates
@@ -88,6 +89,9 @@ class Track:
             views from nearby directions (the first's included).
         cameras: the camera positions of those views [m], for the part views from nearby
             places share.
+        outlines: what the detector saw of the fruit in each of those views (None where not
+            known), for the claims' offset (:meth:`~bve_mj.estimation.noise.NoiseModel.
+            centre_offset_cov`).
         views: the views whose detections it holds.
         viewpoints: the camera positions of those views, those within
             :data:`SAME_VIEWPOINT_M` of an earlier one left out [m].
@@ -108,6 +112,7 @@ class Track:
     innovations: list[tuple[float, float]] = field(default_factory=list)
     directions: list[np.ndarray] = field(default_factory=list)
     cameras: list[np.ndarray] = field(default_factory=list)
+    outlines: list[Outline | None] = field(default_factory=list)
     views: set[int] = field(default_factory=set)
     viewpoints: list[np.ndarray] = field(default_factory=list)
     sensor_info: np.ndarray | None = None
@@ -345,6 +350,7 @@ class Tracker:
         t.innovations.append((result.nis, shared_dof(model, 3, centre_share, radius_share)))
         t.directions.append(direction)
         t.cameras.append(camera)
+        t.outlines.append(s.outline)
         events.append(TrackEvent("updated", t.id))
         if not t.confirmed and len(t.viewpoints) >= self.config.confirm_hits:
             t.confirmed = True
@@ -373,6 +379,7 @@ class Tracker:
         )  # the detection is its first measurement (its belief is the prior's update by it)
         t.directions.append(unit(s.model.p_world_camera - belief.centre_m))
         t.cameras.append(np.asarray(s.model.p_world_camera, dtype=float).copy())
+        t.outlines.append(s.outline)
         t.note_viewpoint(s.model.p_world_camera)
         self._next_id += 1
         self.tracks.append(t)
@@ -381,6 +388,7 @@ class Tracker:
     def snapshot(self) -> tuple[Track, ...]:
         """Copies of the tracks (for records: later views do not change them)."""
         copies = {"innovations": list, "directions": list, "cameras": list, "views": set, "viewpoints": list}
+        copies["outlines"] = list
         return tuple(
             dataclasses.replace(t, **{k: make(getattr(t, k)) for k, make in copies.items()})
             for t in self.tracks

@@ -63,11 +63,13 @@ class FruitState:
 
 
 def claimed(track: Track, claims: Claims | None, stop_sigma_m: float, converge_after: int) -> FruitState:
-    """The state a track claims: its belief with the claims, and whether it is localised."""
+    """The state a track claims: its belief with the claims (the centre's offset conditioned
+    on what the detector saw of the fruit in the views the track fused, ``track.outlines``),
+    and whether it is localised."""
     belief, sensor = track.belief, None
     if claims is not None:
         share = sensor_share(belief.cov, track.sensor_info)
-        belief = claims.claim(belief, track.innovations, track.missed_share, sensor_cov=share)
+        belief = claims.claim(belief, track.innovations, track.missed_share, track.outlines, share)
         sensor = claims.sensor_part(share, track.innovations)
     localised = track.confirmed and track.hits >= converge_after and belief.sigma_max_m <= stop_sigma_m
     return FruitState(

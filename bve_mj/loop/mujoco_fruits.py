@@ -339,7 +339,7 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         q = world.q_measured if world.q_measured is not None else q0
         baseline = make_arm_planner(search, loss, names, kin, q, planner_rng, check.constraints)
         planner = PatternPlanner(check.planner(baseline), zone_belief)
-    claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF)
+    claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF, fruit.shape_index)
     rounds = s.tracking.pick_rounds
     behind = min_arc if s.tracking.zone_behind_fruit else 0.0
     grid = (zone, s.tracking.zone_m, fruit.radius_m, f, cam.width_px, cam.height_px, s.tracking.max_range_m)

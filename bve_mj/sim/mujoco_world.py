@@ -17,10 +17,10 @@ import mujoco
 import numpy as np
 
 from bve_mj.config import FruitPrior, MeasurementConfig, Settings
+from bve_mj.estimation.assignment import Sighting, detected_outline
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.models import BearingSizeModel, CameraModel, RangeModel, SizeModel
-from bve_mj.estimation.noise import NoiseModel, Outline, load_noise_model, measure
-from bve_mj.estimation.tracks import Sighting
+from bve_mj.estimation.noise import NoiseModel, load_noise_model, measure
 from bve_mj.estimation.unmeasured import unmeasured_sighting
 from bve_mj.perception.detection import Detection, NoDetection, Prediction
 from bve_mj.perception.protocol import DetectionRequest, Detector, EveryFruitDetector, detector_from_settings
@@ -280,10 +280,7 @@ class MujocoWorld:
             enc = np.diag([(2.5 * s.sensor.encoder_noise_rad) ** 2] * 2 + [0.0])
             cov += enc
             self.last.measurement = (z, cov)
-            # what the built-in detector saw (a detection with its own covariance is another
-            # detector's: the claim keeps the noise model's bound over all fruits for it)
-            own = getattr(det, "measurement_cov", None) is not None
-            outline = None if own else Outline(det.neighbour_share)
+            outline = detected_outline(det)
             if s.measurement.kind in ("camera", "auto"):
                 sensor = enc if s.sensor.encoder_noise_rad > 0.0 else None
                 return Observation(z, BearingSizeModel(p, R, cov), outline, sensor)
@@ -315,7 +312,8 @@ class MujocoWorld:
         for det in found.detections:
             z, cov = measure(det, self.noise, s.fruit.shape_index, self.intrinsics.focal_px)
             enc = np.diag([(2.5 * s.sensor.encoder_noise_rad) ** 2] * 2 + [0.0])  # as in observe
-            sightings.append(Sighting(z, BearingSizeModel(p, R, cov + enc), enc if enc.any() else None))
+            sensor = enc if enc.any() else None
+            sightings.append(Sighting(z, BearingSizeModel(p, R, cov + enc), sensor, detected_outline(det)))
         self._unmeasured = []
         for r in found.refused:
             if r.partial and r.centre_px is not None and r.radius_px is not None:
