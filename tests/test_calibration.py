@@ -11,7 +11,8 @@ from bve_mj.cli import main
 from bve_mj.config import CameraConfig
 from bve_mj.errors import ConfigError
 from bve_mj.estimation import Belief
-from bve_mj.estimation.noise import FEATURES, load_noise_model, measure
+from bve_mj.estimation.measure import measure
+from bve_mj.estimation.noise import FEATURES, load_noise_model
 from bve_mj.estimation.noise_fit import fit_noise_model
 from bve_mj.geometry import camera_rotation
 from bve_mj.loop.claims import Claims

@@ -14,7 +14,8 @@ from bve_mj.cli.episode import episode_cli_settings
 from bve_mj.cli.parser import build_parser
 from bve_mj.config import CameraConfig, DetectorConfig, FruitPrior, MeasurementConfig, settings_from_dict
 from bve_mj.errors import ConfigError
-from bve_mj.estimation.noise import load_noise_model, measure
+from bve_mj.estimation.measure import measure
+from bve_mj.estimation.noise import load_noise_model
 from bve_mj.perception import (
     BoxDetector,
     BuiltinDetector,

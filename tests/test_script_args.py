@@ -51,6 +51,7 @@ BAD = {
     "benchmarks/compare_horizon.py": (["--horizons", "1,9"], "--horizons"),
     "benchmarks/compare_planners.py": (["--seed", "x"], "--seed"),
     "benchmarks/claim_moments.py": (["no_such_file.json"], "rows_json"),
+    "benchmarks/partial_colour_offset.py": (["no_such_file.json"], "rows_json"),
     "benchmarks/detection_by_arc.py": (["--only", "no_such_scene"], "--only"),
     "benchmarks/honesty_tails.py": (["no_such_file.json"], "suite_json"),
     "benchmarks/episode_claims.py": (["no_such_file.json", "--check", "README.md"], "calibration"),

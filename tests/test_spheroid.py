@@ -257,7 +257,8 @@ def test_a_spheroid_pulled_off_the_circle_by_a_neighbour_s_arc_is_measured_with_
 
 
 def test_the_fits_disagreement_adds_to_the_centre_s_sigma_the_filter_is_given():
-    from bve_mj.estimation.noise import load_noise_model, measure
+    from bve_mj.estimation.measure import measure
+    from bve_mj.estimation.noise import load_noise_model
     from bve_mj.perception import Detection
 
     ray = np.array([1.0, 0.02, -0.01]) / np.linalg.norm([1.0, 0.02, -0.01])

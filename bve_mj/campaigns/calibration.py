@@ -120,6 +120,7 @@ def sample_views(
                 "true_radius_m": target.radius_m,
                 "shape_index": target.shape_index,
                 "colour": target.colour,
+                "ripe_class": settings.detector.ripe_class or "red",
                 "fruit_shape_index": fruit.shape_index,
                 "camera_position_m": p.tolist(),
                 "camera_rotation": R.tolist(),
@@ -228,6 +229,7 @@ def _every_fruit_rows(
 
     view = {k: view_row[k] for k in ("scenario", "scene_seed", "view", "aim_sigma_m", "fruit_shape_index",
                                      "camera_position_m", "camera_rotation")}  # fmt: skip
+    view["ripe_class"] = view_row.get("ripe_class", "red")
 
     def fruit_fields(i: int, fr: Fruit, t: np.ndarray, dist: float) -> dict[str, Any]:
         return {

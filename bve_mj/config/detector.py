@@ -18,7 +18,11 @@ from bve_mj.config.fields import (
 )
 from bve_mj.errors import ConfigError
 
-__all__ = ["DetectorConfig"]
+__all__ = ["RED_CLASSES", "DetectorConfig"]
+
+
+RED_CLASSES = (None, "red")
+"""The ripe classes that admit only fruit red all over (None: the default, ``red_hue_max``)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -231,6 +235,11 @@ class DetectorConfig:
             isinstance(self.ambiguity_ratio, (int, float)) and 1.0 < self.ambiguity_ratio < math.inf
         ):
             raise ConfigError("detector.ambiguity_ratio", self.ambiguity_ratio, "a finite number > 1")
+
+    @property
+    def partial_colour(self) -> bool:
+        """Whether the ripe class admits fruit coloured only in part (a class short of red)."""
+        return self.ripe_class not in RED_CLASSES
 
     @property
     def ripe_hue_max(self) -> int:

@@ -89,7 +89,6 @@ __all__ = [
     "NoiseModel",
     "Outline",
     "load_noise_model",
-    "measure",
 ]
 
 FEATURES = ("floor", "fit", "partial", "elongation", "scale", "neighbour", "neighbour_fit", "near")
@@ -162,6 +161,10 @@ class NoiseModel:
         centre_offset_terms: coefficients (3,) of the fruit's own offset's variance [share of
             the radius²] on :data:`OFFSET_FEATURES`, or () (a file that does not say): the
             offset is then ``centre_bias_rel`` whatever was seen.
+        partial_colour_offset: the fruit's own offset's variance [share of the radius²] added
+            where the detector fits fruit coloured in part (a ``detector.ripe_class`` short of
+            red: the fit follows the coloured cap's edge), shaped as ``centre_bias_rel``
+            (:mod:`bve_mj.estimation.partial_colour`; 0 in a file that does not say).
         outlier_share, outlier_scale: the views' own errors as a scale mixture: a share π of
             them err κ times the σ above (:mod:`bve_mj.estimation.outliers`; the tracker
             fuses with it). π = 0 (a file that does not say): Gaussian.
@@ -186,6 +189,7 @@ class NoiseModel:
     view_moment_scale: float | None = None
     radius_moment_scale: float | None = None
     centre_offset_terms: tuple[float, ...] = ()
+    partial_colour_offset: float = 0.0
     outlier_share: float = 0.0
     outlier_scale: float = 1.0
 
@@ -203,8 +207,9 @@ class NoiseModel:
             math.isfinite(x) and x >= 0.0 for x in self.centre_bias_rel
         ):
             raise ValueError("centre_bias_rel must be 2 finite numbers >= 0")
-        if not (math.isfinite(self.refusal_scale) and self.refusal_scale >= 0.0):
-            raise ValueError("refusal_scale must be a finite number >= 0")
+        for name in ("refusal_scale", "partial_colour_offset"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0.0):
+                raise ValueError(f"{name} must be a finite number >= 0")
         for name in ("tail_scale", "view_tail_scale"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 1.0):
                 raise ValueError(f"{name} must be a finite number >= 1")
@@ -366,6 +371,7 @@ def load_noise_model(name: str = "default") -> NoiseModel:
                 "view_tail_scale": float(values.get("view_tail_scale", values.get("tail_scale", 1.0))),
                 **{k: None if values.get(k) is None else float(values[k]) for k in _MOMENTS},
                 "centre_offset_terms": tuple(float(x) for x in values.get("centre_offset_terms", ())),
+                "partial_colour_offset": float(values.get("partial_colour_offset", 0.0)),
                 "outlier_share": float(values.get("outlier_share", 0.0)),
                 "outlier_scale": float(values.get("outlier_scale", 1.0)),
                 **{k: ViewCorrelation(**values[k]) for k in _CORRELATIONS if k in values},
@@ -373,28 +379,3 @@ def load_noise_model(name: str = "default") -> NoiseModel:
         )
     except (KeyError, TypeError, ValueError) as exc:
         raise ConfigError(field, name, f"a complete noise model ({type(exc).__name__}: {exc})") from None
-
-
-def measure(
-    det: Any, noise: NoiseModel, shape_index: float, focal_px: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """The measurement a :class:`~bve_mj.perception.detection.Detection` gives the bearing/size
-    models: z = (a_y / a_x, a_z / a_x, α) with the apparent radius' bias removed, and its
-    covariance (3, 3) [rad²] from the noise model.
-
-    A detection that states its own covariance (``measurement_cov``: a box or mask from
-    another detector, :mod:`bve_mj.perception.adapters`) keeps it, and its α as measured: the
-    noise model and its bias are the built-in detector's."""
-    a = det.bearing_camera
-    own = getattr(det, "measurement_cov", None)
-    if own is not None:
-        z = np.array([a[1] / a[0], a[2] / a[0], det.angular_radius_rad])
-        return z, np.array(own, dtype=float)
-    sc, sr = noise.sigmas_px(
-        det.radius_px, det.arc_deg, det.centre_fit_px, det.radius_fit_px, shape_index,
-        getattr(det, "neighbour_share", 0.0),
-    )  # fmt: skip
-    sc = math.hypot(sc, getattr(det, "centre_disagreement_px", 0.0))  # the two fits' disagreement
-    alpha = det.angular_radius_rad - noise.radius_bias(det.radius_px) / focal_px
-    z = np.array([a[1] / a[0], a[2] / a[0], alpha])
-    return z, np.diag([(sc / focal_px) ** 2, (sc / focal_px) ** 2, (sr / focal_px) ** 2])

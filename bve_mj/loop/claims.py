@@ -5,13 +5,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import partial
 
 import numpy as np
 
 from bve_mj.estimation import Belief
 from bve_mj.estimation.claim_shape import GAUSSIAN, ClaimShape
 from bve_mj.estimation.noise import NoiseModel, Outline
+from bve_mj.estimation.partial_colour import partial_colour_cov
 from bve_mj.estimation.sensor_share import nearest_psd
 
 __all__ = ["Claims", "shape_of"]
@@ -75,6 +75,7 @@ class Claims:
         shape_index: float = 1.0,
         *,
         size_only: bool = False,
+        partial_colour: bool = False,
     ) -> Claims:
         """The claims of a fruit of ``fruit_radius_m`` and ``shape_index`` measured by the
         calibrated detector ``noise``: its centre offset (from what the detector saw of it,
@@ -82,20 +83,23 @@ class Claims:
 
         ``size_only``: the episode measures the apparent size alone (range): the calibration's
         episode-like draws are of the camera measurement, so such an episode claims with the
-        single views' κ² and the offset's bound over all fruits (``view_tail_scale``)."""
+        single views' κ² and the offset's bound over all fruits (``view_tail_scale``).
+        ``partial_colour``: the detector fits fruit that may be coloured only in part (its
+        ripe class is short of red): the offset of the coloured cap's edge is added
+        (:func:`~bve_mj.estimation.partial_colour.partial_colour_cov`)."""
+        extra = partial_colour_cov(noise, fruit_radius_m) if partial_colour else np.zeros((3, 3))
+        bound = noise.centre_bias_cov(fruit_radius_m) + extra
         if size_only:
             return cls(
-                noise.centre_bias_cov(fruit_radius_m), innovation_prior_dof, noise.refusal_scale,
-                noise.view_tail_scale, shape=noise.view_claim_shape,
+                bound, innovation_prior_dof, noise.refusal_scale, noise.view_tail_scale,
+                shape=noise.view_claim_shape,
             )  # fmt: skip
-        return cls(
-            noise.centre_bias_cov(fruit_radius_m),
-            innovation_prior_dof,
-            noise.refusal_scale,
-            noise.tail_scale,
-            partial(noise.centre_offset_cov, fruit_radius_m, shape_index),
-            noise.claim_shape,
-        )
+
+        def offset_of(outlines: Sequence[Outline | None]) -> np.ndarray:
+            return noise.centre_offset_cov(fruit_radius_m, shape_index, outlines) + extra
+
+        tail = noise.tail_scale
+        return cls(bound, innovation_prior_dof, noise.refusal_scale, tail, offset_of, noise.claim_shape)
 
     def scale(self, innovations: Sequence[tuple[float, float]]) -> float:
         """s² for these (NIS, degrees of freedom) pairs: each view's dimension, or the share

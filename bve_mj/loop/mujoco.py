@@ -346,7 +346,7 @@ def episode_parts(
     if world.noise is not None:
         claims = Claims.of_detector(
             world.noise, s.fruit.radius_m, INNOVATION_PRIOR_DOF, s.fruit.shape_index,
-            size_only=s.measurement.kind not in ("camera", "auto"),
+            size_only=s.measurement.kind not in ("camera", "auto"), partial_colour=s.detector.partial_colour,
         )  # fmt: skip
         correlation = (world.noise.centre_correlation, world.noise.radius_correlation)
     if recorder is not None:

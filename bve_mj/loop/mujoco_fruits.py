@@ -246,17 +246,9 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         return FruitsEpisode(FruitsResult((), 0.0, Outcome.UNREACHABLE), info, s, seed, zone)
     ep, cam = s.episode, s.camera
     world = MujocoWorld(
-        search,
-        kin,
-        start.model,
-        info,
-        start.q_start,
-        zone,
-        np.random.default_rng(start.sensor_ss),
-        keep_images=recorder is not None,
-        on_step=None if recorder is None else recorder.on_step,
-        noise=noise,
-    )
+        search, kin, start.model, info, start.q_start, zone, np.random.default_rng(start.sensor_ss),
+        keep_images=recorder is not None, on_step=None if recorder is None else recorder.on_step, noise=noise,
+    )  # fmt: skip
     if recorder is not None:
         recorder.attach(world, ripe_fruit_in_zone(info, s, zone), zone)
     f = cam.focal_px
@@ -339,7 +331,10 @@ def _run(s: Settings, search: Settings, seed: int, recorder: RecordsFruits | Non
         q = world.q_measured if world.q_measured is not None else q0
         baseline = make_arm_planner(search, loss, names, kin, q, planner_rng, check.constraints)
         planner = PatternPlanner(check.planner(baseline), zone_belief)
-    claims = Claims.of_detector(noise, fruit.radius_m, INNOVATION_PRIOR_DOF, fruit.shape_index)
+    claims = Claims.of_detector(
+        noise, fruit.radius_m, INNOVATION_PRIOR_DOF, fruit.shape_index,
+        partial_colour=s.detector.partial_colour,
+    )  # fmt: skip
     rounds = s.tracking.pick_rounds
     behind = min_arc if s.tracking.zone_behind_fruit else 0.0
     grid = (zone, s.tracking.zone_m, fruit.radius_m, f, cam.width_px, cam.height_px, s.tracking.max_range_m)

@@ -19,8 +19,9 @@ import numpy as np
 from bve_mj.config import FruitPrior, MeasurementConfig, Settings
 from bve_mj.estimation.assignment import Sighting, detected_outline
 from bve_mj.estimation.belief import Belief
+from bve_mj.estimation.measure import measure
 from bve_mj.estimation.models import BearingSizeModel, CameraModel, RangeModel, SizeModel
-from bve_mj.estimation.noise import NoiseModel, load_noise_model, measure
+from bve_mj.estimation.noise import NoiseModel, load_noise_model
 from bve_mj.estimation.unmeasured import unmeasured_sighting
 from bve_mj.perception.detection import Detection, NoDetection, Prediction
 from bve_mj.perception.protocol import DetectionRequest, Detector, EveryFruitDetector, detector_from_settings

@@ -1,0 +1,85 @@
+"""The own offset of a fruit the detector sees coloured in part.
+
+A detector asked for fruit short of red (``detector.ripe_class`` ``turning``, ``pink`` or
+``light_red``: a market that harvests early) fits the coloured part of a fruit that may be
+coloured only in part: a turning fruit shows 10-30% of its skin coloured, from the blossom
+end up, and the fit's circle follows that cap's edge where the silhouette is green. The
+centre it fits is off the fruit's true centre by the same amount from every view, several
+times a red fruit's own offset (calibration seed 11, ``bve-mj calibrate --only turning``:
+the turning fruits' offsets are 1.3% of their radius at the median, red ones' 0.1-0.5%),
+and no view averages it out. So the claim adds a variance for it, a share
+``NoiseModel.partial_colour_offset`` of the radius², fitted here to the calibration fruits a
+detector of such a class measured (:func:`fit_partial_colour_offset`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from bve_mj.config.detector import RED_CLASSES
+from bve_mj.estimation.noise import NoiseModel
+
+__all__ = ["fit_partial_colour_offset", "partial_colour_cov"]
+
+
+def partial_colour_cov(model: NoiseModel, radius_m: float) -> np.ndarray:
+    """The covariance [m²] (3, 3) the claim adds for a fruit of ``radius_m`` a detector of a
+    class short of red measures: ``model.partial_colour_offset`` · r², shaped (horizontal,
+    vertical) as the fruit's own offset's bound (``model.centre_bias_rel``)."""
+    h, v = model.centre_bias_rel
+    mean = (2.0 * h * h + v * v) / 3.0
+    if mean <= 0.0 or model.partial_colour_offset <= 0.0:
+        return np.zeros((3, 3))
+    return np.diag([h * h, h * h, v * v]) * (model.partial_colour_offset / mean) * radius_m**2
+
+
+def fit_partial_colour_offset(
+    kept: Sequence[dict[str, Any]], model: NoiseModel, focal_px: float
+) -> tuple[float, int]:
+    """(s, n): the share s of the radius² that the own offset of the ``n`` calibration fruits
+    measured by a detector of a class short of red (rows whose ``ripe_class`` is not red)
+    adds to ``model``'s offset for them. Each such fruit's offset b (the weighted least-squares
+    offset its views share, with its covariance C) is taken as N(0, (g + s) r² S + C), g the
+    model's own share for it (its shape and neighbours) and S the bound's shape; s is fitted
+    by maximum likelihood and then raised, if need be, until 97.1% of the offsets lie within
+    the 3σ ellipsoid (χ²₃(9): an honest 3σ ellipsoid's share), as the model's own offset is
+    sized. (0, n) with fewer than 5 such fruits."""
+    from scipy.optimize import minimize_scalar
+
+    from bve_mj.estimation.noise_fit import _fruit_offsets, _seen
+
+    partial = [r for r in kept if r.get("ripe_class") not in RED_CLASSES]
+    offsets = _fruit_offsets(partial, model, focal_px)
+    seen = _seen(partial)
+    h, v = model.centre_bias_rel
+    mean = (2.0 * h * h + v * v) / 3.0
+    if len(offsets) < 5 or mean <= 0.0:
+        return 0.0, len(offsets)
+    shape = np.array([h * h, h * h, v * v]) / mean
+    fruits = []
+    for key, (b, C, r) in offsets.items():
+        base = model.centre_offset_cov(r, *seen[key])  # the model's own, shaped as the bound
+        g = float(np.trace(base) / r**2 / np.sum(shape)) if r > 0.0 else 0.0
+        fruits.append((b / r, C / r**2, g))
+
+    def distances(s: float) -> np.ndarray:
+        return np.array([b @ np.linalg.solve(np.diag((g + s) * shape) + C, b) for b, C, g in fruits])
+
+    def nll(log_s: float) -> float:
+        s = math.exp(log_s)
+        dets = [np.linalg.slogdet(np.diag((g + s) * shape) + C)[1] for _, C, g in fruits]
+        return float(0.5 * (np.sum(dets) + np.sum(distances(s))))
+
+    best = minimize_scalar(nll, bounds=(math.log(1e-9), math.log(1e-2)), method="bounded")
+    s = math.exp(float(best.x))
+    lo, hi = s, s
+    while np.mean(distances(hi) <= 9.0) < 0.971 and hi < 1.0:
+        hi *= 2.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if np.mean(distances(mid) <= 9.0) < 0.971 else (lo, mid)
+    return float(hi), len(fruits)
