@@ -2,6 +2,7 @@
 calibration rows, the claim adds it only for such a detector, and the episode wires it."""
 
 import json
+import pickle
 
 import numpy as np
 import pytest
@@ -53,6 +54,8 @@ def test_a_detector_short_of_red_claims_the_caps_offset_and_a_red_one_as_before(
     np.testing.assert_array_equal(red.offset_of(seen), noise.centre_offset_cov(0.03, 0.9, seen))
     np.testing.assert_allclose(turning.offset_of(seen), red.offset_of(seen) + extra)
     np.testing.assert_allclose(turning.centre_offset_cov, noise.centre_bias_cov(0.03) + extra)
+    again = pickle.loads(pickle.dumps(turning))  # a spawned worker's claims travel
+    np.testing.assert_array_equal(again.offset_of(seen), turning.offset_of(seen))
     size_only = Claims.of_detector(noise, 0.03, 6.0, 0.9, size_only=True, partial_colour=True)
     np.testing.assert_allclose(size_only.centre_offset_cov, noise.centre_bias_cov(0.03) + extra)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -94,10 +95,7 @@ class Claims:
                 bound, innovation_prior_dof, noise.refusal_scale, noise.view_tail_scale,
                 shape=noise.view_claim_shape,
             )  # fmt: skip
-
-        def offset_of(outlines: Sequence[Outline | None]) -> np.ndarray:
-            return noise.centre_offset_cov(fruit_radius_m, shape_index, outlines) + extra
-
+        offset_of = partial(_offset_with, noise, fruit_radius_m, shape_index, extra)  # picklable
         tail = noise.tail_scale
         return cls(bound, innovation_prior_dof, noise.refusal_scale, tail, offset_of, noise.claim_shape)
 
@@ -148,6 +146,17 @@ class Claims:
             cov *= math.exp(self.refusal_scale * min(max(refused_share, 0.0), 1.0))
         cov *= self.tail_scale
         return Belief(belief.mean, cov if kept is None else cov + kept)
+
+
+def _offset_with(
+    noise: NoiseModel,
+    radius_m: float,
+    shape_index: float,
+    extra: np.ndarray,
+    outlines: Sequence[Outline | None],
+) -> np.ndarray:
+    """The fruit's own offset from what was seen (``noise.centre_offset_cov``) plus ``extra``."""
+    return noise.centre_offset_cov(radius_m, shape_index, outlines) + extra
 
 
 def shape_of(claims: Claims | None) -> ClaimShape:
