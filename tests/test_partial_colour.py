@@ -1,6 +1,7 @@
 """The own offset of fruit a detector of a class short of red fits: the fit recovers it from
 calibration rows, the claim adds it only for such a detector, and the episode wires it."""
 
+import dataclasses
 import json
 import pickle
 
@@ -12,7 +13,12 @@ from bve_mj.config.settings import load_settings
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.noise import Outline, load_noise_model
 from bve_mj.estimation.noise_fit import fit_noise_model
-from bve_mj.estimation.partial_colour import fit_partial_colour_offset, partial_colour_cov
+from bve_mj.estimation.noise_tail import row_sigmas
+from bve_mj.estimation.partial_colour import (
+    fit_partial_colour_offset,
+    fit_partial_colour_view,
+    partial_colour_cov,
+)
 from bve_mj.loop.claims import Claims
 from tests.test_calibration import _synthetic_rows
 
@@ -41,6 +47,35 @@ def test_the_fit_recovers_the_offset_of_fruit_coloured_in_part(rng):
     assert fit_partial_colour_offset(turning[:48], model, f)[0] == 0.0  # 4 fruits: too few
 
 
+def test_the_fit_recovers_the_views_bias_and_noise_of_fruit_coloured_in_part(rng):
+    """Turning views see the apparent radius 0.6 px smaller than the model's bias and err with
+    4 times its variance (centre and radius): the fit finds both; red rows, or too few, none."""
+    f = CameraConfig().focal_px
+    model, _ = fit_noise_model(_synthetic_rows(rng), CameraConfig(), "test")
+    turning = _synthetic_rows(rng, fruits=20)
+    for r in turning:
+        sc, sr = row_sigmas(model, r)
+        r["ripe_class"] = "pink"
+        r["err_u_px"] += rng.normal(0, np.sqrt(3.0) * sc)
+        r["err_v_px"] += rng.normal(0, np.sqrt(3.0) * sc)
+        r["err_alpha_px"] += -0.6 + rng.normal(0, np.sqrt(3.0) * sr)
+    (delta, k_c, k_r), views = fit_partial_colour_view(turning, model, f)
+    assert views == 240 and delta == pytest.approx(-0.6, abs=0.1)
+    assert k_c == pytest.approx(4.0, rel=0.3) and k_r == pytest.approx(4.0, rel=0.3)
+    assert fit_partial_colour_view([{**r, "ripe_class": "red"} for r in turning], model, f)[0] == (
+        0.0,
+        1.0,
+        1.0,
+    )
+    assert fit_partial_colour_view(turning[:29], model, f)[0] == (0.0, 1.0, 1.0)
+    viewed = dataclasses.replace(model, partial_colour_view=(delta, k_c, k_r)).for_partial_colour()
+    r = turning[0]
+    sc, sr = row_sigmas(model, r)
+    assert row_sigmas(viewed, r) == pytest.approx((sc * np.sqrt(k_c), sr * np.sqrt(k_r)))
+    assert viewed.radius_bias(50.0) == pytest.approx(model.radius_bias(50.0) + delta)
+    assert viewed.partial_colour_view == (0.0, 1.0, 1.0)  # applied once
+
+
 def test_a_detector_short_of_red_claims_the_caps_offset_and_a_red_one_as_before():
     noise = load_noise_model("default")
     assert noise.partial_colour_offset > 0.0  # the shipped model carries it
@@ -60,14 +95,17 @@ def test_a_detector_short_of_red_claims_the_caps_offset_and_a_red_one_as_before(
     np.testing.assert_allclose(size_only.centre_offset_cov, noise.centre_bias_cov(0.03) + extra)
 
 
-def test_a_model_file_without_the_term_loads_with_none_and_a_negative_one_is_refused(tmp_path):
+def test_a_model_file_without_the_terms_loads_with_none_and_bad_ones_are_refused(tmp_path):
     data = load_noise_model("default").to_json()
     path = tmp_path / "old.json"
-    path.write_text(json.dumps({k: v for k, v in data.items() if k != "partial_colour_offset"}))
-    assert load_noise_model(str(path)).partial_colour_offset == 0.0
-    path.write_text(json.dumps({**data, "partial_colour_offset": -1e-5}))
-    with pytest.raises(ConfigError, match="partial_colour_offset"):
-        load_noise_model(str(path))
+    old = {k: v for k, v in data.items() if k not in ("partial_colour_offset", "partial_colour_view")}
+    path.write_text(json.dumps(old))
+    model = load_noise_model(str(path))
+    assert model.partial_colour_offset == 0.0 and model.partial_colour_view == (0.0, 1.0, 1.0)
+    for key, bad in (("partial_colour_offset", -1e-5), ("partial_colour_view", [0.0, -1.0, 1.0])):
+        path.write_text(json.dumps({**data, key: bad}))
+        with pytest.raises(ConfigError, match=key):
+            load_noise_model(str(path))
 
 
 def test_an_episode_whose_detector_wants_turning_fruit_claims_the_caps_offset():
@@ -81,6 +119,8 @@ def test_an_episode_whose_detector_wants_turning_fruit_claims_the_caps_offset():
         parts = episode_parts(start, start.q_start)
         parts.world.close()
         fruit = start.settings.fruit
+        bias = noise.radius_bias_px[0] + (noise.partial_colour_view[0] if partial else 0.0)
+        assert start.noise.radius_bias_px[0] == pytest.approx(bias, abs=1e-12)  # the views' own
         own = noise.centre_offset_cov(fruit.radius_m, fruit.shape_index, seen)
         extra = partial_colour_cov(noise, fruit.radius_m) if partial else np.zeros((3, 3))
         np.testing.assert_allclose(parts.claims.offset_of(seen), own + extra, rtol=1e-12, atol=0.0)

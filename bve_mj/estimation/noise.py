@@ -69,7 +69,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -165,6 +165,9 @@ class NoiseModel:
             where the detector fits fruit coloured in part (a ``detector.ripe_class`` short of
             red: the fit follows the coloured cap's edge), shaped as ``centre_bias_rel``
             (:mod:`bve_mj.estimation.partial_colour`; 0 in a file that does not say).
+        partial_colour_view: the same detector's views: (δ, k_c, k_r), its apparent radius
+            δ px further below the bias above, and the variances of its centre and apparent
+            radius k_c and k_r times the model's ((0, 1, 1) in a file that does not say).
         outlier_share, outlier_scale: the views' own errors as a scale mixture: a share π of
             them err κ times the σ above (:mod:`bve_mj.estimation.outliers`; the tracker
             fuses with it). π = 0 (a file that does not say): Gaussian.
@@ -190,6 +193,7 @@ class NoiseModel:
     radius_moment_scale: float | None = None
     centre_offset_terms: tuple[float, ...] = ()
     partial_colour_offset: float = 0.0
+    partial_colour_view: tuple[float, float, float] = (0.0, 1.0, 1.0)
     outlier_share: float = 0.0
     outlier_scale: float = 1.0
 
@@ -214,6 +218,9 @@ class NoiseModel:
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 1.0):
                 raise ValueError(f"{name} must be a finite number >= 1")
         _ = (self.claim_shape, self.view_claim_shape)  # raise ValueError naming a moment scale
+        v = self.partial_colour_view
+        if len(v) != 3 or not all(math.isfinite(x) for x in v) or min(v[1:]) <= 0.0:
+            raise ValueError("partial_colour_view must be 3 finite numbers, the last two > 0")
         n, terms = len(OFFSET_FEATURES), self.centre_offset_terms
         if terms and (len(terms) != n or not all(math.isfinite(x) and x >= 0.0 for x in terms)):
             raise ValueError(f"centre_offset_terms must be {n} finite numbers >= 0, or none")
@@ -282,6 +289,17 @@ class NoiseModel:
         return np.array(
             [1.0, fit_px**2, partial**2, elongation**2, scale, (n * r) ** 2, n * fit_px**2, scale**2]
         )
+
+    def for_partial_colour(self) -> NoiseModel:
+        """The model of a detector whose ripe class is short of red: ``partial_colour_view``'s
+        bias and variance scales applied to every view (and then spent: (0, 1, 1))."""
+        d, kc, kr = self.partial_colour_view
+        return replace(
+            self, centre_var_px2=tuple(kc * x for x in self.centre_var_px2),
+            radius_var_px2=tuple(kr * x for x in self.radius_var_px2),
+            radius_bias_px=(self.radius_bias_px[0] + d, self.radius_bias_px[1]),
+            partial_colour_view=(0.0, 1.0, 1.0),
+        )  # fmt: skip
 
     def radius_bias(self, radius_px: float) -> float:
         """How much smaller the detector sees the apparent radius than it is [px] (negative)."""
@@ -372,6 +390,7 @@ def load_noise_model(name: str = "default") -> NoiseModel:
                 **{k: None if values.get(k) is None else float(values[k]) for k in _MOMENTS},
                 "centre_offset_terms": tuple(float(x) for x in values.get("centre_offset_terms", ())),
                 "partial_colour_offset": float(values.get("partial_colour_offset", 0.0)),
+                "partial_colour_view": tuple(float(x) for x in values.get("partial_colour_view", (0, 1, 1))),
                 "outlier_share": float(values.get("outlier_share", 0.0)),
                 "outlier_scale": float(values.get("outlier_scale", 1.0)),
                 **{k: ViewCorrelation(**values[k]) for k in _CORRELATIONS if k in values},

@@ -332,6 +332,8 @@ def start_episode(
     if s.filter.state == "centre_radius":
         noise = load_noise_model(s.measurement.noise_model)
         noise.check_camera(s.camera, s.measurement.noise_model)
+        if s.detector.partial_colour:  # a class short of red: its views' own bias and noise
+            noise = noise.for_partial_colour()
     scene_ss, prior_ss, sensor_ss, planner_ss, fault_ss = np.random.SeedSequence(seed).spawn(5)
     kin = arm_kinematics(s.robot.name, s.robot.limit_set)
     kept = target is None and distractors is None and edit is None
