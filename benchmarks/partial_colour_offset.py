@@ -30,7 +30,7 @@ from bve_mj.cli.script import ScriptParser, guarded
 from bve_mj.config import Settings
 from bve_mj.config.detector import RED_CLASSES
 from bve_mj.estimation.noise import NoiseModel, load_noise_model
-from bve_mj.estimation.noise_fit import _fruit_offsets, _seen, split_gross
+from bve_mj.estimation.noise_fit import fruit_offsets, seen_outlines, split_gross
 from bve_mj.estimation.partial_colour import (
     fit_partial_colour_offset,
     fit_partial_colour_view,
@@ -43,7 +43,7 @@ def _inside(kept: list[dict], model: NoiseModel, focal_px: float) -> tuple[float
     for them (the model's own offset and the partial-colour term), and how many."""
     rows = [r for r in kept if r.get("ripe_class") not in RED_CLASSES]
     model = model.for_partial_colour()  # the views' own scales: each offset's covariance C
-    offsets, seen = _fruit_offsets(rows, model, focal_px), _seen(rows)
+    offsets, seen = fruit_offsets(rows, model, focal_px), seen_outlines(rows)
     d2 = [
         float(b @ np.linalg.solve(model.centre_offset_cov(r, *seen[k]) + partial_colour_cov(model, r) + C, b))
         for k, (b, C, r) in offsets.items()

@@ -18,7 +18,16 @@ from bve_mj.estimation.noise_tail import FruitKey, fit_claim_shape, fruit_key, r
 from bve_mj.estimation.outliers import OutlierMixture, fit_outlier_mixture
 from bve_mj.estimation.view_correlation import ViewCorrelation, fit_view_correlation
 
-__all__ = ["GROSS_SIGMAS", "fit_noise_model", "noise_report", "split_gross", "within_gross"]
+__all__ = [
+    "GROSS_SIGMAS",
+    "fit_noise_model",
+    "fruit_offsets",
+    "noise_report",
+    "seen_outlines",
+    "split_gross",
+    "within_gross",
+    "without_offsets",
+]
 
 
 def fit_noise_model(
@@ -49,12 +58,12 @@ def fit_noise_model(
     # two levels: each fruit's own offset (the same from every view) and each view's own
     # error; the per-view noise is fitted to what is left once the offsets are taken out
     for _ in range(3):
-        offsets = _fruit_offsets(kept, model, f)
-        model = _fit(_without_offsets(kept, offsets, f), camera, source)
-    offsets = _fruit_offsets(kept, model, f)
+        offsets = fruit_offsets(kept, model, f)
+        model = _fit(without_offsets(kept, offsets, f), camera, source)
+    offsets = fruit_offsets(kept, model, f)
     model = replace(model, centre_bias_rel=_offset_bound(offsets))
-    model = replace(model, centre_offset_terms=_offset_terms(offsets, _seen(kept), model))
-    per_view = _without_offsets(kept, offsets, f)
+    model = replace(model, centre_offset_terms=_offset_terms(offsets, seen_outlines(kept), model))
+    per_view = without_offsets(kept, offsets, f)
     centre_corr, radius_corr = _view_correlations(per_view, model)
     model = replace(model, centre_correlation=centre_corr, radius_correlation=radius_corr)
     refusal, fruits = _refusal_scale([*refused, *kept], model)
@@ -91,7 +100,7 @@ def _outlier_mixture(det: Sequence[dict[str, Any]], model: NoiseModel, focal_px:
     if not det:
         return OutlierMixture()
     kept = within_gross(det, model)
-    own = _without_offsets(det, _fruit_offsets(kept, model, focal_px), focal_px)
+    own = without_offsets(det, fruit_offsets(kept, model, focal_px), focal_px)
     return fit_outlier_mixture(np.square(_components(own, model).reshape(-1, 3)).sum(axis=1), 3)
 
 
@@ -154,7 +163,7 @@ def _fit(det: Sequence[dict[str, Any]], camera: CameraConfig, source: str) -> No
     )
 
 
-def _fruit_offsets(
+def fruit_offsets(
     det: Sequence[dict[str, Any]], model: NoiseModel, focal_px: float
 ) -> dict[FruitKey, tuple[np.ndarray, np.ndarray, float]]:
     """Each fruit's own world-frame offset of the fitted centre: per fruit (the rows of one
@@ -187,7 +196,7 @@ def _fruit_offsets(
     return out
 
 
-def _without_offsets(
+def without_offsets(
     det: Sequence[dict[str, Any]],
     offsets: dict[FruitKey, tuple[np.ndarray, np.ndarray, float]],
     focal_px: float,
@@ -239,7 +248,7 @@ def _offset_bound(
     return (math.sqrt(hi * h), math.sqrt(hi * v))
 
 
-def _seen(det: Sequence[dict[str, Any]]) -> dict[FruitKey, tuple[float, list[Outline]]]:
+def seen_outlines(det: Sequence[dict[str, Any]]) -> dict[FruitKey, tuple[float, list[Outline]]]:
     """Per fruit (:func:`fruit_key`): its type's shape index and what its detections saw."""
     out: dict[FruitKey, tuple[float, list[Outline]]] = {}
     for r in det:

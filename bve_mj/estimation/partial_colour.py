@@ -25,6 +25,8 @@ import numpy as np
 
 from bve_mj.config.detector import RED_CLASSES
 from bve_mj.estimation.noise import NoiseModel
+from bve_mj.estimation.noise_fit import fruit_offsets, seen_outlines, without_offsets
+from bve_mj.estimation.noise_tail import row_sigmas
 
 __all__ = ["MIN_VIEWS", "fit_partial_colour_offset", "fit_partial_colour_view", "partial_colour_cov"]
 
@@ -53,13 +55,11 @@ def fit_partial_colour_view(
     radius (δ taken out) over the model's variance, at least 1: such a view never claims
     less noise than the model over every fruit says. ((0, 1, 1), n) with fewer than
     :data:`MIN_VIEWS`."""
-    from bve_mj.estimation.noise_fit import _fruit_offsets, _without_offsets
-    from bve_mj.estimation.noise_tail import row_sigmas
 
     rows = [r for r in kept if r.get("ripe_class") not in RED_CLASSES]
     if len(rows) < MIN_VIEWS:
         return (0.0, 1.0, 1.0), len(rows)
-    own = _without_offsets(rows, _fruit_offsets(rows, model, focal_px), focal_px)
+    own = without_offsets(rows, fruit_offsets(rows, model, focal_px), focal_px)
     radius = np.array([r["err_alpha_px"] - model.radius_bias(r["radius_px"]) for r in own])
     sigmas = np.array([row_sigmas(model, r) for r in own])
     centre = np.array([0.5 * (r["err_u_px"] ** 2 + r["err_v_px"] ** 2) for r in own]) / sigmas[:, 0] ** 2
@@ -81,11 +81,9 @@ def fit_partial_colour_offset(
     sized. (0, n) with fewer than 5 such fruits."""
     from scipy.optimize import minimize_scalar
 
-    from bve_mj.estimation.noise_fit import _fruit_offsets, _seen
-
     partial = [r for r in kept if r.get("ripe_class") not in RED_CLASSES]
-    offsets = _fruit_offsets(partial, model, focal_px)
-    seen = _seen(partial)
+    offsets = fruit_offsets(partial, model, focal_px)
+    seen = seen_outlines(partial)
     h, v = model.centre_bias_rel
     mean = (2.0 * h * h + v * v) / 3.0
     if len(offsets) < 5 or mean <= 0.0:
