@@ -128,3 +128,33 @@ def test_every_suite_scenario_ships_in_the_wheel():
     shipped = set(files["share/bve_mj/scenarios"])
     suite = {p.relative_to(root).as_posix() for p in (root / "examples/scenarios/suite").glob("*.toml")}
     assert suite == shipped, (suite - shipped, shipped - suite)
+
+
+def test_the_ci_constraints_pin_every_requirement_within_its_range():
+    """``.ci/constraints.txt`` (what ``.ci/run`` installs under) pins each of pyproject's
+    requirements, the extras' too, to a version its range allows: a dependency added without
+    a pin, or a range moved past the pin, fails here before CI installs something else."""
+    from pathlib import Path
+
+    import tomllib
+    from packaging.requirements import Requirement
+    from packaging.utils import canonicalize_name
+
+    root = Path(__file__).resolve().parents[1]
+    project = tomllib.loads((root / "pyproject.toml").read_text())["project"]
+    pins = {}
+    for line in (root / ".ci/constraints.txt").read_text().splitlines():
+        if line.strip() and not line.startswith("#"):
+            name, version = line.split("==")
+            pins[canonicalize_name(name)] = version.strip()
+    wanted = [
+        *project["dependencies"],
+        *(r for group in project["optional-dependencies"].values() for r in group),
+    ]
+    for text in wanted:
+        req = Requirement(text)
+        if req.marker is not None and not req.marker.evaluate():
+            continue  # e.g. tomli on Python < 3.11
+        name = canonicalize_name(req.name)
+        assert name in pins, f"{req.name} has no pin in .ci/constraints.txt"
+        assert req.specifier.contains(pins[name], prereleases=True), (text, pins[name])
