@@ -31,11 +31,7 @@ from bve_mj.config import Settings
 from bve_mj.config.detector import RED_CLASSES
 from bve_mj.estimation.noise import NoiseModel, load_noise_model
 from bve_mj.estimation.noise_fit import fruit_offsets, seen_outlines, split_gross
-from bve_mj.estimation.partial_colour import (
-    fit_partial_colour_offset,
-    fit_partial_colour_view,
-    partial_colour_cov,
-)
+from bve_mj.estimation.partial_colour import fit_partial_colour, partial_colour_cov
 
 
 def _inside(kept: list[dict], model: NoiseModel, focal_px: float) -> tuple[float, int]:
@@ -74,13 +70,11 @@ def main() -> None:
     before, _ = _inside(
         kept, replace(model, partial_colour_offset=0.0, partial_colour_view=(0.0, 1.0, 1.0)), f
     )
-    view, views = fit_partial_colour_view(kept, model, f)
-    viewed = replace(model, partial_colour_view=view)
-    share, fruits = fit_partial_colour_offset(kept, viewed.for_partial_colour(), f)
-    fitted = replace(viewed, partial_colour_offset=share)
+    fitted, views, fruits = fit_partial_colour(kept, model, f)
+    share = fitted.partial_colour_offset
     after, _ = _inside(kept, fitted, f)
     print(f"{views} views of a detector class short of red ({args.rows_json})")
-    d, kc, kr = view
+    d, kc, kr = fitted.partial_colour_view
     print(f"their views: apparent radius {d:+.3f} px beyond the bias,", end=" ")
     print(f"variance x{kc:.2f} (centre), x{kr:.2f} (radius)")
     print(f"{fruits} fruits with 6 views or more: their own offset {share:.3e} of the radius²", end=" ")

@@ -427,6 +427,9 @@ def test_calibrate_renders_real_detections_and_writes_a_loadable_model(tmp_path,
     assert "twin pairs" in model.source
     printed = capsys.readouterr().out
     assert "wrote" in printed and "views from one place share more" in printed
+    # a red detector's rows fit no partial-colour terms, and the command says so
+    assert model.partial_colour_offset == 0.0 and model.partial_colour_view == (0.0, 1.0, 1.0)
+    assert "a detector of a class short of red: 0 views, 0 fruits, too few" in printed
 
 
 @pytest.mark.parametrize(

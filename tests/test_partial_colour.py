@@ -15,6 +15,7 @@ from bve_mj.estimation.noise import Outline, load_noise_model
 from bve_mj.estimation.noise_fit import fit_noise_model
 from bve_mj.estimation.noise_tail import row_sigmas
 from bve_mj.estimation.partial_colour import (
+    fit_partial_colour,
     fit_partial_colour_offset,
     fit_partial_colour_view,
     partial_colour_cov,
@@ -74,6 +75,26 @@ def test_the_fit_recovers_the_views_bias_and_noise_of_fruit_coloured_in_part(rng
     assert row_sigmas(viewed, r) == pytest.approx((sc * np.sqrt(k_c), sr * np.sqrt(k_r)))
     assert viewed.radius_bias(50.0) == pytest.approx(model.radius_bias(50.0) + delta)
     assert viewed.partial_colour_view == (0.0, 1.0, 1.0)  # applied once
+
+
+def test_calibrate_fits_both_terms_from_its_own_rows_and_none_from_red_ones(rng):
+    """What ``bve-mj calibrate`` fits last (``fit_partial_colour``): from rows of a turning
+    detector whose views err 0.6 px small and whose fruits are offset 2% of r, the views'
+    bias and then, under it, the offset; from red rows none, though the model held terms."""
+    f = CameraConfig().focal_px
+    model, _ = fit_noise_model(_synthetic_rows(rng), CameraConfig(), "test")
+    turning = _synthetic_rows(rng, fruits=24, offset_rel=lambda n: 0.02)
+    for r in turning:
+        r["ripe_class"], r["neighbour_share"] = "turning", 0.0
+        r["err_alpha_px"] -= 0.6
+    fitted, views, fruits = fit_partial_colour(turning, model, f)
+    assert (views, fruits) == (288, 24)
+    assert fitted.partial_colour_view[0] == pytest.approx(-0.6, abs=0.1)
+    assert 2e-4 < fitted.partial_colour_offset < 1.2e-3
+    red = [{**r, "ripe_class": "red"} for r in turning]
+    none, views, fruits = fit_partial_colour(red, fitted, f)
+    assert (views, fruits) == (0, 0)
+    assert none.partial_colour_view == (0.0, 1.0, 1.0) and none.partial_colour_offset == 0.0
 
 
 def test_a_detector_short_of_red_claims_the_caps_offset_and_a_red_one_as_before():

@@ -41,7 +41,8 @@ from bve_mj.campaigns.scenarios import Scenario
 from bve_mj.campaigns.view_draws import calibration_scene, draw_direction
 from bve_mj.errors import ConfigError
 from bve_mj.estimation.noise import NoiseModel
-from bve_mj.estimation.noise_fit import fit_noise_model
+from bve_mj.estimation.noise_fit import fit_noise_model, split_gross
+from bve_mj.estimation.partial_colour import fit_partial_colour
 
 if TYPE_CHECKING:
     from bve_mj.perception.all_fruit import FruitDetections
@@ -342,7 +343,9 @@ def calibrate(
     """Render and detect (:func:`run_calibration`), then fit the noise model
     (:func:`~bve_mj.estimation.noise_fit.fit_noise_model`) and, from ``twin_views`` views of
     each scene and their twins, the part nearby views share
-    (:func:`~bve_mj.campaigns.twin_views.fit_twins`; 0: none): the model, how well it describes
+    (:func:`~bve_mj.campaigns.twin_views.fit_twins`; 0: none), and last what a detector of a
+    class short of red errs beyond the rest (:func:`~bve_mj.estimation.partial_colour.
+    fit_partial_colour`, from the rows of such detectors): the model, how well it describes
     the samples, and the samples. The default seed (1) keeps the scenario suite's episodes
     (seeds 0 and 7777 there) out of the calibration."""
     from bve_mj.campaigns.twin_views import fit_twins
@@ -378,4 +381,9 @@ def calibrate(
             model, scenarios, scenes=scenes, views=twin_views, seed=seed, workers=cores
         )
         report["twins"] = {"views": twin_views, "pairs": pairs, "table": [t._asdict() for t in table]}
+    # last, under the rest: what a detector of a class short of red errs beyond it (none from
+    # too few such rows: the suite's own scenes render two or three such fruits)
+    kept = split_gross(target, camera)[0]
+    model, views_short, fruits_short = fit_partial_colour(kept, model, camera.focal_px)
+    report["partial_colour"] = {"views": views_short, "fruits": fruits_short}
     return model, report, data

@@ -171,6 +171,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from bve_mj.campaigns.drawn_scenes import write_drawn_scenes
     from bve_mj.campaigns.scenarios import load_suite
     from bve_mj.errors import ConfigError
+    from bve_mj.estimation.partial_colour import MIN_VIEWS
 
     scenes = int_arg("scenes", args.scenes, 1) or 1
     views = int_arg("views", args.views, 1) or 1
@@ -247,6 +248,20 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         f"outliers: {100 * model.outlier_share:.1f}% of views err {model.outlier_scale:.1f}x the σ above "
         "(a scale mixture the tracker fuses with)"
     )
+    short = report["partial_colour"]
+    if model.partial_colour_offset > 0.0 or model.partial_colour_view != (0.0, 1.0, 1.0):
+        d, kc, kr = model.partial_colour_view
+        print(
+            f"a detector of a class short of red ({short['views']} views, {short['fruits']} fruits): "
+            f"apparent radius {d:+.3f} px beyond the bias, variance x{kc:.2f} (centre), x{kr:.2f} "
+            f"(radius); its fruits' own offset {model.partial_colour_offset:.3e} of the radius²"
+        )
+    else:
+        print(
+            f"a detector of a class short of red: {short['views']} views, {short['fruits']} fruits, too few "
+            f"to fit its terms (>= {MIN_VIEWS} views, 5 fruits): none in this model (calibrate the turning "
+            "scene alone and run benchmarks/partial_colour_offset.py on its rows)"
+        )
     write_json_atomic(out, model.to_json())
     print(f'wrote {out} (wall {data.wall_s:.0f} s); use it with [measurement] noise_model = "{out}"')
     if json_path is not None:

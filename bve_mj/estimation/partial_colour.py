@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -28,7 +29,13 @@ from bve_mj.estimation.noise import NoiseModel
 from bve_mj.estimation.noise_fit import fruit_offsets, seen_outlines, without_offsets
 from bve_mj.estimation.noise_tail import row_sigmas
 
-__all__ = ["MIN_VIEWS", "fit_partial_colour_offset", "fit_partial_colour_view", "partial_colour_cov"]
+__all__ = [
+    "MIN_VIEWS",
+    "fit_partial_colour",
+    "fit_partial_colour_offset",
+    "fit_partial_colour_view",
+    "partial_colour_cov",
+]
 
 MIN_VIEWS = 30
 """Detections of such fruit :func:`fit_partial_colour_view` needs; with fewer it fits none."""
@@ -112,3 +119,17 @@ def fit_partial_colour_offset(
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if np.mean(distances(mid) <= 9.0) < 0.971 else (lo, mid)
     return float(hi), len(fruits)
+
+
+def fit_partial_colour(
+    kept: Sequence[dict[str, Any]], model: NoiseModel, focal_px: float
+) -> tuple[NoiseModel, int, int]:
+    """(model', views, fruits): ``model`` with both terms fitted from the rows of a detector of
+    a class short of red (``views`` of them, ``fruits`` with 6 views or more): the views' bias
+    and variance scales (:func:`fit_partial_colour_view`), then, under them, the offset
+    (:func:`fit_partial_colour_offset`). With too few rows a term is none ((0, 1, 1) and 0),
+    never the one ``model`` held: a model is fitted from its own rows."""
+    view, views = fit_partial_colour_view(kept, model, focal_px)
+    viewed = replace(model, partial_colour_view=view)
+    share, fruits = fit_partial_colour_offset(kept, viewed.for_partial_colour(), focal_px)
+    return replace(viewed, partial_colour_offset=share), views, fruits
