@@ -145,3 +145,17 @@ def test_an_episode_whose_detector_wants_turning_fruit_claims_the_caps_offset():
         own = noise.centre_offset_cov(fruit.radius_m, fruit.shape_index, seen)
         extra = partial_colour_cov(noise, fruit.radius_m) if partial else np.zeros((3, 3))
         np.testing.assert_allclose(parts.claims.offset_of(seen), own + extra, rtol=1e-12, atol=0.0)
+
+
+def test_the_planner_expects_of_a_turning_detectors_views_what_the_filter_fuses_them_with():
+    """The BVE's variance of a view not taken is the detector's: for a turning detector the
+    model with its views' scales (the filter's, ``start_episode``), not the red fruit's."""
+    from bve_mj.planning.size_information import size_information
+
+    turning = load_settings("examples/scenarios/suite/turning.toml")
+    red = dataclasses.replace(turning, detector=dataclasses.replace(turning.detector, ripe_class=None))
+    _, k_c, k_r = load_noise_model("default").partial_colour_view
+    assert k_c > 1.5 and k_r > 1.5  # the shipped terms: the test means something
+    mine, theirs = size_information(turning), size_information(red)
+    assert mine.bearing_var == pytest.approx(tuple(k_c * v for v in theirs.bearing_var), rel=1e-9, abs=1e-15)
+    assert mine.size_var == pytest.approx(tuple(k_r * v for v in theirs.size_var), rel=1e-9, abs=1e-15)

@@ -20,25 +20,40 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from bve_mj.config.detector import RED_CLASSES
-from bve_mj.estimation.noise import NoiseModel
+from bve_mj.estimation.noise import NoiseModel, load_noise_model
 from bve_mj.estimation.noise_fit import fruit_offsets, seen_outlines, without_offsets
 from bve_mj.estimation.noise_tail import row_sigmas
 
 __all__ = [
     "MIN_VIEWS",
+    "detector_noise_model",
     "fit_partial_colour",
     "fit_partial_colour_offset",
     "fit_partial_colour_view",
     "partial_colour_cov",
 ]
 
+if TYPE_CHECKING:
+    from bve_mj.config import Settings
+
 MIN_VIEWS = 30
 """Detections of such fruit :func:`fit_partial_colour_view` needs; with fewer it fits none."""
+
+
+def detector_noise_model(settings: Settings) -> NoiseModel:
+    """The calibrated noise of ``settings``' detector, as the filter and the planner use it:
+    ``measurement.noise_model`` loaded and checked against the camera (a
+    :class:`~bve_mj.errors.ConfigError` naming the file otherwise), with its views' terms
+    applied (:meth:`~bve_mj.estimation.noise.NoiseModel.for_partial_colour`) for a detector
+    of a class short of red."""
+    noise = load_noise_model(settings.measurement.noise_model)
+    noise.check_camera(settings.camera, settings.measurement.noise_model)
+    return noise.for_partial_colour() if settings.detector.partial_colour else noise
 
 
 def partial_colour_cov(model: NoiseModel, radius_m: float) -> np.ndarray:

@@ -20,7 +20,8 @@ import numpy as np
 from bve_mj.config import CameraConfig, EpisodeConfig, RobotConfig, SceneConfig, Settings
 from bve_mj.errors import PlanningError
 from bve_mj.estimation.belief import Belief
-from bve_mj.estimation.noise import NoiseModel, load_noise_model
+from bve_mj.estimation.noise import NoiseModel
+from bve_mj.estimation.partial_colour import detector_noise_model
 from bve_mj.estimation.prior_bound import PriorBound
 from bve_mj.geometry import ray_frame
 from bve_mj.robot import ArmKinematics, IkOptions, arm_kinematics, look_at_ik
@@ -330,10 +331,7 @@ def start_episode(
     ep = s.episode
     noise = None
     if s.filter.state == "centre_radius":
-        noise = load_noise_model(s.measurement.noise_model)
-        noise.check_camera(s.camera, s.measurement.noise_model)
-        if s.detector.partial_colour:  # a class short of red: its views' own bias and noise
-            noise = noise.for_partial_colour()
+        noise = detector_noise_model(s)  # a class short of red: its views' own bias and noise
     scene_ss, prior_ss, sensor_ss, planner_ss, fault_ss = np.random.SeedSequence(seed).spawn(5)
     kin = arm_kinematics(s.robot.name, s.robot.limit_set)
     kept = target is None and distractors is None and edit is None

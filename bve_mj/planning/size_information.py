@@ -306,11 +306,13 @@ def _weight(var: tuple[float, ...], T: float, dT: float) -> tuple[float, float]:
 
 def size_information(settings: Settings) -> SizeInformation:
     """The planner's model for the radius-in-state filter under ``settings``: the calibrated
-    noise (``measurement.noise_model``) of a whole fruit of the prior's shape index, and
-    the encoders' white bearing noise."""
-    from bve_mj.estimation.noise import FEATURES, load_noise_model
+    noise (``measurement.noise_model``, as the detector's views have it:
+    :func:`~bve_mj.estimation.partial_colour.detector_noise_model`) of a whole fruit of the
+    prior's shape index, and the encoders' white bearing noise."""
+    from bve_mj.estimation.noise import FEATURES
+    from bve_mj.estimation.partial_colour import detector_noise_model
 
-    noise = load_noise_model(settings.measurement.noise_model)
+    noise = detector_noise_model(settings)
     f = settings.camera.focal_px
     k = settings.fruit.shape_index
     # a whole fruit, no neighbour: σ² [px²] = a + b·r_px² + c·r_px⁴ with r_px = f·T; in rad²,

@@ -21,7 +21,8 @@ from bve_mj.estimation.assignment import Sighting, detected_outline
 from bve_mj.estimation.belief import Belief
 from bve_mj.estimation.measure import measure
 from bve_mj.estimation.models import BearingSizeModel, CameraModel, RangeModel, SizeModel
-from bve_mj.estimation.noise import NoiseModel, load_noise_model
+from bve_mj.estimation.noise import NoiseModel
+from bve_mj.estimation.partial_colour import detector_noise_model
 from bve_mj.estimation.unmeasured import unmeasured_sighting
 from bve_mj.perception.detection import Detection, NoDetection, Prediction
 from bve_mj.perception.protocol import DetectionRequest, Detector, EveryFruitDetector, detector_from_settings
@@ -148,8 +149,7 @@ class MujocoWorld:
         self.measurement, self.fruit_prior = declared_noise(settings)
         self.noise = noise
         if noise is None and settings.filter.state == "centre_radius":
-            self.noise = load_noise_model(settings.measurement.noise_model)
-            self.noise.check_camera(cam, settings.measurement.noise_model)
+            self.noise = detector_noise_model(settings)
         self.detector = detector if detector is not None else self._settings_detector()
         self._target = np.asarray(target, dtype=float).copy()
         self._keep_images = keep_images
