@@ -171,7 +171,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from bve_mj.campaigns.drawn_scenes import write_drawn_scenes
     from bve_mj.campaigns.scenarios import load_suite
     from bve_mj.errors import ConfigError
-    from bve_mj.estimation.partial_colour import MIN_VIEWS
+    from bve_mj.estimation.partial_colour import MIN_FRUITS, MIN_VIEWS
 
     scenes = int_arg("scenes", args.scenes, 1) or 1
     views = int_arg("views", args.views, 1) or 1
@@ -259,8 +259,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     else:
         print(
             f"a detector of a class short of red: {short['views']} views, {short['fruits']} fruits, too few "
-            f"to fit its terms (>= {MIN_VIEWS} views, 5 fruits): none in this model (calibrate the turning "
-            "scene alone and run benchmarks/partial_colour_offset.py on its rows)"
+            f"to fit its terms (>= {MIN_VIEWS} views, {MIN_FRUITS} fruits): none in this model (calibrate "
+            "the turning scene alone and run benchmarks/partial_colour_offset.py on its rows)"
         )
     write_json_atomic(out, model.to_json())
     print(f'wrote {out} (wall {data.wall_s:.0f} s); use it with [measurement] noise_model = "{out}"')

@@ -30,6 +30,7 @@ from bve_mj.estimation.noise_fit import fruit_offsets, seen_outlines, without_of
 from bve_mj.estimation.noise_tail import row_sigmas
 
 __all__ = [
+    "MIN_FRUITS",
     "MIN_VIEWS",
     "detector_noise_model",
     "fit_partial_colour",
@@ -43,6 +44,9 @@ if TYPE_CHECKING:
 
 MIN_VIEWS = 30
 """Detections of such fruit :func:`fit_partial_colour_view` needs; with fewer it fits none."""
+
+MIN_FRUITS = 5
+"""Such fruits (6 views or more) :func:`fit_partial_colour_offset` needs; with fewer it fits none."""
 
 
 def detector_noise_model(settings: Settings) -> NoiseModel:
@@ -100,7 +104,7 @@ def fit_partial_colour_offset(
     model's own share for it (its shape and neighbours) and S the bound's shape; s is fitted
     by maximum likelihood and then raised, if need be, until 97.1% of the offsets lie within
     the 3σ ellipsoid (χ²₃(9): an honest 3σ ellipsoid's share), as the model's own offset is
-    sized. (0, n) with fewer than 5 such fruits."""
+    sized. (0, n) with fewer than :data:`MIN_FRUITS` such fruits."""
     from scipy.optimize import minimize_scalar
 
     partial = [r for r in kept if r.get("ripe_class") not in RED_CLASSES]
@@ -108,7 +112,7 @@ def fit_partial_colour_offset(
     seen = seen_outlines(partial)
     h, v = model.centre_bias_rel
     mean = (2.0 * h * h + v * v) / 3.0
-    if len(offsets) < 5 or mean <= 0.0:
+    if len(offsets) < MIN_FRUITS or mean <= 0.0:
         return 0.0, len(offsets)
     shape = np.array([h * h, h * h, v * v]) / mean
     fruits = []
